@@ -1,0 +1,429 @@
+//! One frame on the wire: encoding a [`Frame`] into a [`FrameHeader`] plus
+//! [`BufferPayload`]s, and the sans-IO [`FrameAssembler`] that checks and
+//! reassembles them on the receiving side (one per per-frame stream).
+
+use crate::codec::{self, CodecError};
+use crate::frame::{BufferDesc, BufferKind, Frame};
+use crate::wire::{
+    self, BufferPayload, Decoder, FrameHeader, Message, MessageKind, StreamBuffer, WireError,
+};
+use crate::{Limits, ValidationError};
+
+/// A frame stream that cannot be built or reassembled.
+#[derive(Debug, thiserror::Error)]
+pub enum AssembleError {
+    /// The bytes are not valid messages.
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    /// A frame or buffer list breaks the data contract.
+    #[error(transparent)]
+    Invalid(#[from] ValidationError),
+    /// A payload failed to encode or decode.
+    #[error("{kind:?} buffer: {source}")]
+    Codec {
+        /// The buffer.
+        kind: BufferKind,
+        /// What the codec reported.
+        #[source]
+        source: CodecError,
+    },
+    /// A message that does not belong on a frame stream, or out of order.
+    #[error("unexpected {0:?} on a frame stream")]
+    Unexpected(MessageKind),
+    /// A payload arrived before the header.
+    #[error("payload before the frame header")]
+    HeaderMissing,
+    /// A payload belongs to another frame.
+    #[error("payload for frame {got} on the stream of frame {expected}")]
+    FrameIndexMismatch {
+        /// The header's index.
+        expected: u64,
+        /// The payload's index.
+        got: u64,
+    },
+    /// A payload for a buffer the header did not list.
+    #[error("payload for unlisted buffer {0:?}")]
+    UnlistedBuffer(BufferKind),
+    /// The same buffer twice.
+    #[error("payload for {0:?} received twice")]
+    DuplicatePayload(BufferKind),
+    /// A payload's length differs from the header's.
+    #[error("{kind:?} payload is {got} bytes, header said {expected}")]
+    LengthMismatch {
+        /// The buffer.
+        kind: BufferKind,
+        /// From the header.
+        expected: u64,
+        /// Received.
+        got: u64,
+    },
+    /// The stream ended before every listed buffer arrived.
+    #[error("stream ended with {missing:?} missing")]
+    Incomplete {
+        /// Buffers not received.
+        missing: Vec<BufferKind>,
+    },
+}
+
+/// A frame whose header and every payload arrived and were checked against
+/// each other; the codecs have not run yet, so a receiver can drop a stale
+/// frame before paying for decoding.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EncodedFrame {
+    /// The header.
+    pub header: FrameHeader,
+    /// One payload per header buffer, in the header's order.
+    pub payloads: Vec<BufferPayload>,
+}
+
+impl EncodedFrame {
+    /// Runs the codecs and builds the [`Frame`].
+    pub fn decode(&self) -> Result<Frame, AssembleError> {
+        let meta = self.header.meta;
+        let mut frame = Frame {
+            meta,
+            color: Vec::new(),
+            depth: Vec::new(),
+            motion: Vec::new(),
+            extras: Vec::new(),
+        };
+        for (desc, payload) in self.header.buffers.iter().zip(&self.payloads) {
+            let raw_len = desc.format.raw_len(meta.size);
+            let raw = codec::decode(desc.codec, desc.format, &payload.data, raw_len).map_err(
+                |source| AssembleError::Codec {
+                    kind: desc.kind,
+                    source,
+                },
+            )?;
+            frame.set_buffer_bytes(desc.kind, desc.format, &raw)?;
+        }
+        Ok(frame)
+    }
+
+    /// Total encoded payload bytes.
+    pub fn payload_bytes(&self) -> u64 {
+        self.payloads.iter().map(|p| p.data.len() as u64).sum()
+    }
+}
+
+/// Encodes `frame` as a header plus payloads, one per entry of `buffers`
+/// (which must include color, depth and motion), at zstd `level`.
+pub fn encode_frame(
+    frame: &Frame,
+    buffers: &[StreamBuffer],
+    level: i32,
+) -> Result<EncodedFrame, AssembleError> {
+    frame.validate(&Limits::default())?;
+    let mut descs = Vec::with_capacity(buffers.len());
+    let mut payloads = Vec::with_capacity(buffers.len());
+    for b in buffers {
+        b.validate()?;
+        let raw = frame.buffer_bytes(b.kind, b.format)?;
+        let data = codec::encode_with_level(b.codec, b.format, &raw, level).map_err(|source| {
+            AssembleError::Codec {
+                kind: b.kind,
+                source,
+            }
+        })?;
+        descs.push(BufferDesc {
+            kind: b.kind,
+            format: b.format,
+            codec: b.codec,
+            payload_len: data.len() as u64,
+        });
+        payloads.push(BufferPayload {
+            frame_index: frame.meta.index,
+            kind: b.kind,
+            data,
+        });
+    }
+    let header = FrameHeader {
+        meta: frame.meta,
+        buffers: descs,
+    };
+    Message::FrameHeader(header.clone()).validate(&Limits::default())?;
+    Ok(EncodedFrame { header, payloads })
+}
+
+impl EncodedFrame {
+    /// The bytes of the whole per-frame stream: header message, then payloads.
+    pub fn to_stream_bytes(&self) -> Result<Vec<u8>, AssembleError> {
+        let mut out = Vec::with_capacity(self.payload_bytes() as usize + 1024);
+        wire::encode_into(&Message::FrameHeader(self.header.clone()), &mut out)?;
+        for p in &self.payloads {
+            out.extend_from_slice(&wire::payload_prefix(p.frame_index, p.kind, p.data.len())?);
+            out.extend_from_slice(&p.data);
+        }
+        Ok(out)
+    }
+}
+
+/// Sans-IO reassembly of one per-frame stream: feed it the stream's messages
+/// in order; it checks each against the header and yields the
+/// [`EncodedFrame`] when the last listed payload arrives.
+#[derive(Debug, Default)]
+pub struct FrameAssembler {
+    header: Option<FrameHeader>,
+    payloads: Vec<Option<BufferPayload>>,
+    done: bool,
+}
+
+impl FrameAssembler {
+    /// An assembler waiting for a frame header.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The header, once received.
+    pub fn header(&self) -> Option<&FrameHeader> {
+        self.header.as_ref()
+    }
+
+    /// Takes the next message of the stream (already validated by the wire
+    /// decoder). Returns the frame when it is complete.
+    pub fn push(&mut self, msg: Message) -> Result<Option<EncodedFrame>, AssembleError> {
+        if self.done {
+            return Err(AssembleError::Unexpected(msg.kind()));
+        }
+        match msg {
+            Message::FrameHeader(h) if self.header.is_none() => {
+                self.payloads = vec![None; h.buffers.len()];
+                self.header = Some(h);
+                Ok(None)
+            }
+            Message::Payload(p) => {
+                let header = self.header.as_ref().ok_or(AssembleError::HeaderMissing)?;
+                if p.frame_index != header.meta.index {
+                    return Err(AssembleError::FrameIndexMismatch {
+                        expected: header.meta.index,
+                        got: p.frame_index,
+                    });
+                }
+                let slot = header
+                    .buffers
+                    .iter()
+                    .position(|d| d.kind == p.kind)
+                    .ok_or(AssembleError::UnlistedBuffer(p.kind))?;
+                let expected = header.buffers[slot].payload_len;
+                if p.data.len() as u64 != expected {
+                    return Err(AssembleError::LengthMismatch {
+                        kind: p.kind,
+                        expected,
+                        got: p.data.len() as u64,
+                    });
+                }
+                if self.payloads[slot].is_some() {
+                    return Err(AssembleError::DuplicatePayload(p.kind));
+                }
+                self.payloads[slot] = Some(p);
+                if self.payloads.iter().all(Option::is_some) {
+                    self.done = true;
+                    let header = header.clone();
+                    let payloads = std::mem::take(&mut self.payloads)
+                        .into_iter()
+                        .flatten()
+                        .collect();
+                    return Ok(Some(EncodedFrame { header, payloads }));
+                }
+                Ok(None)
+            }
+            other => Err(AssembleError::Unexpected(other.kind())),
+        }
+    }
+
+    /// Call at the end of the stream: an error unless the frame completed.
+    pub fn finish(&self) -> Result<(), AssembleError> {
+        if self.done {
+            return Ok(());
+        }
+        let missing = match &self.header {
+            None => BufferKind::REQUIRED.to_vec(),
+            Some(h) => h
+                .buffers
+                .iter()
+                .zip(&self.payloads)
+                .filter(|(_, p)| p.is_none())
+                .map(|(d, _)| d.kind)
+                .collect(),
+        };
+        Err(AssembleError::Incomplete { missing })
+    }
+}
+
+/// Decodes a complete per-frame stream held in memory (a test helper and the
+/// path for replaying captured streams): wire decoding, reassembly, codecs.
+pub fn decode_frame_stream(bytes: &[u8], limits: &Limits) -> Result<Frame, AssembleError> {
+    let mut decoder = Decoder::new(*limits);
+    decoder.feed(bytes);
+    let mut assembler = FrameAssembler::new();
+    let mut complete = None;
+    while let Some(msg) = decoder.next_message()? {
+        if let Some(frame) = assembler.push(msg)? {
+            complete = Some(frame);
+        }
+    }
+    if !decoder.is_at_boundary() {
+        return Err(WireError::Incomplete {
+            needed: decoder.buffered(),
+        }
+        .into());
+    }
+    assembler.finish()?;
+    match complete {
+        Some(f) => f.decode(),
+        None => Err(AssembleError::Incomplete { missing: vec![] }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Codec;
+    use crate::frame::tests::sample_frame;
+    use crate::frame::{ExtraBuffer, PixelFormat};
+
+    fn buffers(codec: Codec) -> Vec<StreamBuffer> {
+        vec![
+            StreamBuffer {
+                kind: BufferKind::Color,
+                format: PixelFormat::Rgba16Float,
+                codec: Codec::Raw,
+            },
+            StreamBuffer {
+                kind: BufferKind::Depth,
+                format: PixelFormat::R32Float,
+                codec,
+            },
+            StreamBuffer {
+                kind: BufferKind::Motion,
+                format: PixelFormat::Rg32Float,
+                codec,
+            },
+        ]
+    }
+
+    #[test]
+    fn frame_round_trips_through_a_stream() {
+        let mut frame = sample_frame(42, 37, 21);
+        frame.extras.push(ExtraBuffer {
+            kind: BufferKind::Mask,
+            data: (0..37 * 21).map(|i| (i % 256) as u8).collect(),
+        });
+        for codec in [Codec::Raw, Codec::Zstd] {
+            let mut bufs = buffers(codec);
+            bufs.push(StreamBuffer {
+                kind: BufferKind::Mask,
+                format: PixelFormat::R8Unorm,
+                codec,
+            });
+            let enc = encode_frame(&frame, &bufs, 3).unwrap();
+            let bytes = enc.to_stream_bytes().unwrap();
+            let back = decode_frame_stream(&bytes, &Limits::default()).unwrap();
+            assert_eq!(back, frame);
+            // Byte-by-byte feeding gives the same messages.
+            let mut d = Decoder::new(Limits::default());
+            let mut a = FrameAssembler::new();
+            let mut got = None;
+            for b in &bytes {
+                d.feed(std::slice::from_ref(b));
+                while let Some(m) = d.next_message().unwrap() {
+                    got = a.push(m).unwrap().or(got);
+                }
+            }
+            assert_eq!(got.unwrap(), enc);
+        }
+    }
+
+    #[test]
+    fn payloads_may_arrive_in_any_order_but_must_match_the_header() {
+        let frame = sample_frame(7, 8, 8);
+        let enc = encode_frame(&frame, &buffers(Codec::Zstd), 1).unwrap();
+        let mut a = FrameAssembler::new();
+        assert!(matches!(
+            a.push(Message::Payload(enc.payloads[0].clone())),
+            Err(AssembleError::HeaderMissing)
+        ));
+        let mut a = FrameAssembler::new();
+        a.push(Message::FrameHeader(enc.header.clone())).unwrap();
+        assert!(
+            a.push(Message::Payload(enc.payloads[2].clone()))
+                .unwrap()
+                .is_none()
+        );
+        assert!(matches!(
+            a.push(Message::Payload(enc.payloads[2].clone())),
+            Err(AssembleError::DuplicatePayload(BufferKind::Motion))
+        ));
+        let mut wrong = enc.payloads[0].clone();
+        wrong.frame_index = 8;
+        assert!(matches!(
+            a.push(Message::Payload(wrong)),
+            Err(AssembleError::FrameIndexMismatch {
+                expected: 7,
+                got: 8
+            })
+        ));
+        let mut short = enc.payloads[0].clone();
+        short.data.pop();
+        assert!(matches!(
+            a.push(Message::Payload(short)),
+            Err(AssembleError::LengthMismatch { .. })
+        ));
+        let unlisted = BufferPayload {
+            frame_index: 7,
+            kind: BufferKind::Normal,
+            data: vec![],
+        };
+        assert!(matches!(
+            a.push(Message::Payload(unlisted)),
+            Err(AssembleError::UnlistedBuffer(BufferKind::Normal))
+        ));
+        assert!(
+            matches!(a.finish(), Err(AssembleError::Incomplete { ref missing }) if missing.len() == 2)
+        );
+        a.push(Message::Payload(enc.payloads[1].clone())).unwrap();
+        let done = a
+            .push(Message::Payload(enc.payloads[0].clone()))
+            .unwrap()
+            .unwrap();
+        assert_eq!(done.decode().unwrap(), frame);
+        a.finish().unwrap();
+        assert!(matches!(
+            a.push(Message::Payload(enc.payloads[0].clone())),
+            Err(AssembleError::Unexpected(MessageKind::Payload))
+        ));
+    }
+
+    #[test]
+    fn corrupt_zstd_payload_is_a_codec_error() {
+        let frame = sample_frame(1, 16, 16);
+        let mut enc = encode_frame(&frame, &buffers(Codec::Zstd), 1).unwrap();
+        let d = &mut enc.payloads[1].data;
+        let mid = d.len() / 2;
+        d[mid] ^= 0xff;
+        d[mid + 1] ^= 0x55;
+        // The zstd content checksum catches it.
+        assert!(matches!(
+            enc.decode(),
+            Err(AssembleError::Codec {
+                kind: BufferKind::Depth,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn truncated_stream_is_incomplete() {
+        let frame = sample_frame(1, 16, 16);
+        let bytes = encode_frame(&frame, &buffers(Codec::Raw), 1)
+            .unwrap()
+            .to_stream_bytes()
+            .unwrap();
+        for cut in [0, 5, 100, bytes.len() - 1] {
+            assert!(
+                decode_frame_stream(&bytes[..cut], &Limits::default()).is_err(),
+                "{cut}"
+            );
+        }
+    }
+}

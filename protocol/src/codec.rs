@@ -1,0 +1,257 @@
+//! Buffer codecs (DESIGN §7): raw, and lossless zstd for depth and motion.
+//!
+//! [`Codec::Zstd`] first splits the pixels into byte planes (byte 0 of every
+//! channel value, then byte 1, …): the sign/exponent bytes of neighbouring
+//! floats are nearly equal, so the planes compress far better than the
+//! interleaved values do. Frames carry zstd's content checksum, so corruption
+//! is an error rather than wrong pixels. Decoding never allocates more than the raw size the
+//! frame header implies, which the caller has already validated.
+
+use serde::{Deserialize, Serialize};
+
+use crate::PixelFormat;
+
+/// zstd level used by [`encode`]: level 1 is the fastest that still compresses
+/// depth and motion well; pass another to [`encode_with_level`].
+pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
+
+/// How a buffer's bytes are compressed on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Codec {
+    /// Uncompressed little-endian pixels.
+    Raw,
+    /// Byte-plane shuffle, then zstd (lossless).
+    Zstd,
+}
+
+/// A buffer that cannot be encoded or decoded.
+#[derive(Debug, thiserror::Error)]
+pub enum CodecError {
+    /// The raw input length is not a whole number of channel values.
+    #[error("raw buffer of {len} bytes is not a multiple of the {unit}-byte channel size")]
+    Misaligned {
+        /// Input length.
+        len: usize,
+        /// Channel size.
+        unit: usize,
+    },
+    /// zstd refused the data (corrupt, or larger than the expected size).
+    #[error("zstd: {0}")]
+    Zstd(#[source] std::io::Error),
+    /// The decoded size differs from what the header announced.
+    #[error("decoded {got} bytes, expected {expected}")]
+    WrongLength {
+        /// Bytes produced.
+        got: u64,
+        /// Bytes announced.
+        expected: u64,
+    },
+    /// The encoded payload is longer than a codec can produce for the size.
+    #[error("encoded payload of {len} bytes is outside {min}..={max} for this codec")]
+    EncodedLength {
+        /// Payload length.
+        len: u64,
+        /// Smallest possible.
+        min: u64,
+        /// Largest possible.
+        max: u64,
+    },
+}
+
+impl Codec {
+    /// The range of encoded lengths this codec can produce for `raw` bytes of
+    /// input. Used to reject inconsistent headers before any allocation.
+    pub fn encoded_len_range(self, raw: u64) -> (u64, u64) {
+        match self {
+            Codec::Raw => (raw, raw),
+            Codec::Zstd => (1, zstd_compress_bound(raw)),
+        }
+    }
+}
+
+/// `ZSTD_COMPRESSBOUND` from zstd.h, in `u64`: the largest output zstd
+/// produces for `src` input bytes (one frame).
+pub fn zstd_compress_bound(src: u64) -> u64 {
+    const KB128: u64 = 128 << 10;
+    let margin = if src < KB128 { (KB128 - src) >> 11 } else { 0 };
+    src + (src >> 8) + margin
+}
+
+/// Encodes `raw` pixels of `format` with `codec` at the default zstd level.
+pub fn encode(codec: Codec, format: PixelFormat, raw: &[u8]) -> Result<Vec<u8>, CodecError> {
+    encode_with_level(codec, format, raw, DEFAULT_ZSTD_LEVEL)
+}
+
+/// Encodes `raw` pixels of `format` with `codec`; `level` is the zstd level.
+pub fn encode_with_level(
+    codec: Codec,
+    format: PixelFormat,
+    raw: &[u8],
+    level: i32,
+) -> Result<Vec<u8>, CodecError> {
+    match codec {
+        Codec::Raw => Ok(raw.to_vec()),
+        Codec::Zstd => {
+            let planes = shuffle(raw, format.channel_bytes() as usize)?;
+            let mut z = zstd::bulk::Compressor::new(level).map_err(CodecError::Zstd)?;
+            // A 4-byte checksum per frame turns corruption into an error
+            // instead of wrong pixels.
+            z.include_checksum(true).map_err(CodecError::Zstd)?;
+            z.compress(&planes).map_err(CodecError::Zstd)
+        }
+    }
+}
+
+/// Decodes an `encoded` payload of `format` pixels with `codec`, producing
+/// exactly `expected_len` bytes or an error. `expected_len` must already be
+/// validated against the limits: it is the only size allocated.
+pub fn decode(
+    codec: Codec,
+    format: PixelFormat,
+    encoded: &[u8],
+    expected_len: u64,
+) -> Result<Vec<u8>, CodecError> {
+    let (min, max) = codec.encoded_len_range(expected_len);
+    let len = encoded.len() as u64;
+    if len < min || len > max {
+        return Err(CodecError::EncodedLength { len, min, max });
+    }
+    let unit = format.channel_bytes() as usize;
+    let expected = usize::try_from(expected_len).map_err(|_| CodecError::WrongLength {
+        got: 0,
+        expected: expected_len,
+    })?;
+    if expected % unit != 0 {
+        return Err(CodecError::Misaligned {
+            len: expected,
+            unit,
+        });
+    }
+    match codec {
+        Codec::Raw => Ok(encoded.to_vec()),
+        Codec::Zstd => {
+            let planes = zstd::bulk::decompress(encoded, expected).map_err(CodecError::Zstd)?;
+            if planes.len() != expected {
+                return Err(CodecError::WrongLength {
+                    got: planes.len() as u64,
+                    expected: expected_len,
+                });
+            }
+            unshuffle(&planes, unit)
+        }
+    }
+}
+
+/// Splits interleaved `unit`-byte values into byte planes.
+fn shuffle(raw: &[u8], unit: usize) -> Result<Vec<u8>, CodecError> {
+    if raw.len() % unit != 0 {
+        return Err(CodecError::Misaligned {
+            len: raw.len(),
+            unit,
+        });
+    }
+    if unit == 1 {
+        return Ok(raw.to_vec());
+    }
+    let n = raw.len() / unit;
+    let mut out = vec![0u8; raw.len()];
+    for (i, value) in raw.chunks_exact(unit).enumerate() {
+        for (b, &byte) in value.iter().enumerate() {
+            out[b * n + i] = byte;
+        }
+    }
+    Ok(out)
+}
+
+/// Inverse of [`shuffle`].
+fn unshuffle(planes: &[u8], unit: usize) -> Result<Vec<u8>, CodecError> {
+    if planes.len() % unit != 0 {
+        return Err(CodecError::Misaligned {
+            len: planes.len(),
+            unit,
+        });
+    }
+    if unit == 1 {
+        return Ok(planes.to_vec());
+    }
+    let n = planes.len() / unit;
+    let mut out = vec![0u8; planes.len()];
+    for (i, value) in out.chunks_exact_mut(unit).enumerate() {
+        for (b, byte) in value.iter_mut().enumerate() {
+            *byte = planes[b * n + i];
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn depth_like(n: usize) -> Vec<u8> {
+        (0..n)
+            .map(|i| 10.0f32 + (i % 97) as f32 * 0.01 + (i / 97) as f32 * 0.003)
+            .flat_map(f32::to_le_bytes)
+            .collect()
+    }
+
+    #[test]
+    fn zstd_is_lossless_and_shrinks_smooth_depth() {
+        let raw = depth_like(64 * 64);
+        let enc = encode(Codec::Zstd, PixelFormat::R32Float, &raw).unwrap();
+        assert!(enc.len() * 2 < raw.len(), "{} vs {}", enc.len(), raw.len());
+        let dec = decode(Codec::Zstd, PixelFormat::R32Float, &enc, raw.len() as u64).unwrap();
+        assert_eq!(dec, raw);
+    }
+
+    #[test]
+    fn decode_refuses_wrong_sizes_without_overallocating() {
+        let raw = depth_like(1000);
+        let enc = encode(Codec::Zstd, PixelFormat::R32Float, &raw).unwrap();
+        // Announcing fewer bytes than the data holds: zstd stops at the cap.
+        assert!(decode(Codec::Zstd, PixelFormat::R32Float, &enc, 400).is_err());
+        // Announcing more: the output is short.
+        assert!(matches!(
+            decode(Codec::Zstd, PixelFormat::R32Float, &enc, 8000),
+            Err(CodecError::WrongLength { .. })
+        ));
+        // Raw payloads must match exactly.
+        assert!(matches!(
+            decode(Codec::Raw, PixelFormat::R32Float, &raw, 3996),
+            Err(CodecError::EncodedLength { .. })
+        ));
+        // A payload far larger than the compress bound is refused up front.
+        let junk = vec![0u8; 1000];
+        assert!(matches!(
+            decode(Codec::Zstd, PixelFormat::R32Float, &junk, 8),
+            Err(CodecError::EncodedLength { .. })
+        ));
+        // Garbage is an error, not a panic.
+        assert!(decode(Codec::Zstd, PixelFormat::R32Float, &junk[..100], 4000).is_err());
+    }
+
+    #[test]
+    fn compress_bound_matches_zstd() {
+        for n in [0u64, 1, 100, 131_071, 131_072, 1 << 20, 8192 * 8192 * 8] {
+            assert_eq!(
+                zstd_compress_bound(n),
+                zstd::zstd_safe::compress_bound(n as usize) as u64,
+                "{n}"
+            );
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn round_trip_any_bytes(values in proptest::collection::vec(any::<u32>(), 0..512), level in 1i32..5) {
+            let raw: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+            for (codec, format) in [(Codec::Raw, PixelFormat::R32Float), (Codec::Zstd, PixelFormat::R32Float),
+                                    (Codec::Zstd, PixelFormat::Rg16Float), (Codec::Zstd, PixelFormat::R8Unorm)] {
+                let enc = encode_with_level(codec, format, &raw, level).unwrap();
+                let dec = decode(codec, format, &enc, raw.len() as u64).unwrap();
+                prop_assert_eq!(&dec, &raw);
+            }
+        }
+    }
+}
