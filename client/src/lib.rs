@@ -1,1 +1,11 @@
+//! The streaming client. Transport (quinn), presentation and `eval` arrive
+//! with their issues; the sans-IO core that turns per-frame streams into an
+//! ordered sequence of frames is here already.
+//!
+//! * [`receiver`]: reassembles frames from per-frame streams, delivers them
+//!   in order, supersedes late ones and keeps the statistics the client
+//!   reports to the server.
 
+pub mod receiver;
+
+pub use receiver::{Delivery, FrameReceiver, ReceiveError, StreamId};

@@ -1,1 +1,14 @@
+//! Frame generation for the streaming client: the methods (repeat,
+//! reprojection, GFFE extrapolation, GeoMotionGen interpolation) arrive in
+//! their own modules; this crate already owns what every method is measured
+//! by.
+//!
+//! * [`display`]: the one fixed display transform of DESIGN §9 (exposure 1,
+//!   Reinhard per channel, sRGB OETF, clamp), used by metrics and presenters.
+//! * [`metrics`]: PSNR and SSIM on display-encoded images.
 
+pub mod display;
+pub mod metrics;
+
+pub use display::{DisplayImage, display_encode};
+pub use metrics::{MetricsError, psnr, ssim};

@@ -347,7 +347,7 @@ impl Camera {
             WorldPoint::AtInfinity(d) => (inv * d, f64::INFINITY),
         };
         let depth_along_ray = -view.z;
-        if !(depth_along_ray > 0.0) || !view.is_finite() {
+        if depth_along_ray.is_nan() || depth_along_ray <= 0.0 || !view.is_finite() {
             return None;
         }
         let t = self.projection.tan_half_fov();
@@ -365,7 +365,7 @@ impl Camera {
     /// gives a direction ([`WorldPoint::AtInfinity`]). NaN, zero, negative or
     /// `−inf` depth gives `None`.
     pub fn unproject(&self, pixel: DVec2, depth: f64, size: FrameSizeF) -> Option<WorldPoint> {
-        if !(depth > 0.0) {
+        if depth.is_nan() || depth <= 0.0 {
             return None;
         }
         let ray = self.view_ray(pixel, size);

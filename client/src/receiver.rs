@@ -1,0 +1,377 @@
+//! Sans-IO frame reception (DESIGN §7): one unidirectional stream per frame.
+//!
+//! The transport hands every chunk it reads to [`FrameReceiver::on_data`]
+//! with the stream it came from, and reports stream ends and resets. The
+//! receiver decodes and checks the messages ([`protocol::wire::Decoder`],
+//! [`FrameAssembler`]), and when a frame completes it is delivered only if it
+//! is newer than every frame delivered before; an older one is *late* and is
+//! superseded. Streams still carrying frames older than a delivered one are
+//! returned for cancellation, so a late frame never costs bandwidth or
+//! decoding time once a newer one is shown.
+//!
+//! Like `quinn-proto`, this does no IO and reads no clock, so it is tested
+//! deterministically.
+
+use std::collections::{HashMap, VecDeque};
+
+use protocol::Limits;
+use protocol::assemble::{AssembleError, EncodedFrame, FrameAssembler};
+use protocol::wire::{ClientStats, Decoder};
+
+/// Identifies a transport stream (quinn's stream id as a number).
+pub type StreamId = u64;
+
+/// A per-frame stream that broke the protocol. The caller closes the
+/// connection with this as the reason.
+#[derive(Debug, thiserror::Error)]
+pub enum ReceiveError {
+    /// The stream's bytes are not a valid frame.
+    #[error("stream {stream}: {source}")]
+    Stream {
+        /// The stream.
+        stream: StreamId,
+        /// What is wrong.
+        #[source]
+        source: AssembleError,
+    },
+    /// More streams open at once than allowed.
+    #[error("more than {max} frame streams in flight")]
+    TooManyStreams {
+        /// The limit.
+        max: usize,
+    },
+}
+
+/// What one call produced.
+#[derive(Debug, Default)]
+pub struct Delivery {
+    /// A complete frame, newer than any delivered before.
+    pub frame: Option<EncodedFrame>,
+    /// Streams whose frames are now superseded: stop reading them.
+    pub cancel: Vec<StreamId>,
+}
+
+#[derive(Debug)]
+struct InFlight {
+    decoder: Decoder,
+    assembler: FrameAssembler,
+}
+
+/// Reassembles and orders frames from many concurrent streams.
+#[derive(Debug)]
+pub struct FrameReceiver {
+    limits: Limits,
+    max_streams: usize,
+    streams: HashMap<StreamId, InFlight>,
+    /// Streams cancelled as superseded: bytes the transport had already
+    /// buffered for them are ignored. Bounded to [`CANCELLED_MEMORY`].
+    cancelled: VecDeque<StreamId>,
+    last_delivered: Option<u64>,
+    stats: ClientStats,
+}
+
+/// How many cancelled stream ids are remembered.
+const CANCELLED_MEMORY: usize = 256;
+
+impl FrameReceiver {
+    /// A receiver enforcing `limits` on every stream, with at most
+    /// `max_streams` frames in flight.
+    pub fn new(limits: Limits, max_streams: usize) -> Self {
+        Self {
+            limits,
+            max_streams,
+            streams: HashMap::new(),
+            cancelled: VecDeque::new(),
+            last_delivered: None,
+            stats: ClientStats::default(),
+        }
+    }
+
+    /// Bytes read from `stream`.
+    pub fn on_data(&mut self, stream: StreamId, bytes: &[u8]) -> Result<Delivery, ReceiveError> {
+        if self.cancelled.contains(&stream) {
+            return Ok(Delivery::default());
+        }
+        if !self.streams.contains_key(&stream) && self.streams.len() >= self.max_streams {
+            return Err(ReceiveError::TooManyStreams {
+                max: self.max_streams,
+            });
+        }
+        self.stats.bytes_received += bytes.len() as u64;
+        let limits = self.limits;
+        let entry = self.streams.entry(stream).or_insert_with(|| InFlight {
+            decoder: Decoder::new(limits),
+            assembler: FrameAssembler::new(),
+        });
+        entry.decoder.feed(bytes);
+        let fail = |source: AssembleError| ReceiveError::Stream { stream, source };
+        let mut complete = None;
+        loop {
+            let msg = match entry.decoder.next_message() {
+                Ok(Some(m)) => m,
+                Ok(None) => break,
+                Err(e) => {
+                    self.streams.remove(&stream);
+                    return Err(fail(e.into()));
+                }
+            };
+            match entry.assembler.push(msg) {
+                Ok(Some(frame)) => complete = Some(frame),
+                Ok(None) => {}
+                Err(e) => {
+                    self.streams.remove(&stream);
+                    return Err(fail(e));
+                }
+            }
+        }
+        let mut delivery = Delivery::default();
+        // A header that is already superseded: stop the stream early.
+        if let (Some(h), Some(last)) = (entry.assembler.header(), self.last_delivered) {
+            if complete.is_none() && h.meta.index <= last {
+                self.streams.remove(&stream);
+                self.stats.frames_late += 1;
+                self.remember_cancelled(stream);
+                delivery.cancel.push(stream);
+                return Ok(delivery);
+            }
+        }
+        if let Some(frame) = complete {
+            self.stats.frames_received += 1;
+            let index = frame.header.meta.index;
+            if self.last_delivered.is_some_and(|last| index <= last) {
+                self.stats.frames_late += 1;
+            } else {
+                self.last_delivered = Some(index);
+                delivery.cancel = self.supersede(index, stream);
+                delivery.frame = Some(frame);
+            }
+        }
+        Ok(delivery)
+    }
+
+    /// Drops every in-flight stream other than `keep` whose frame is not
+    /// newer than `index`.
+    fn supersede(&mut self, index: u64, keep: StreamId) -> Vec<StreamId> {
+        let stale: Vec<StreamId> = self
+            .streams
+            .iter()
+            .filter(|&(&id, s)| {
+                id != keep && s.assembler.header().is_some_and(|h| h.meta.index <= index)
+            })
+            .map(|(&id, _)| id)
+            .collect();
+        for &id in &stale {
+            self.streams.remove(&id);
+            self.stats.frames_late += 1;
+            self.remember_cancelled(id);
+        }
+        stale
+    }
+
+    fn remember_cancelled(&mut self, stream: StreamId) {
+        if self.cancelled.len() == CANCELLED_MEMORY {
+            self.cancelled.pop_front();
+        }
+        self.cancelled.push_back(stream);
+    }
+
+    fn forget_cancelled(&mut self, stream: StreamId) -> bool {
+        let found = self.cancelled.iter().position(|&s| s == stream);
+        if let Some(i) = found {
+            self.cancelled.remove(i);
+        }
+        found.is_some()
+    }
+
+    /// The stream ended (FIN). A complete frame has already been delivered;
+    /// ending mid-frame is a protocol error.
+    pub fn on_stream_end(&mut self, stream: StreamId) -> Result<(), ReceiveError> {
+        if self.forget_cancelled(stream) {
+            return Ok(());
+        }
+        let Some(s) = self.streams.remove(&stream) else {
+            return Ok(());
+        };
+        let result = if s.decoder.is_at_boundary() {
+            s.assembler.finish()
+        } else {
+            Err(AssembleError::Wire(protocol::wire::WireError::Incomplete {
+                needed: s.decoder.buffered(),
+            }))
+        };
+        result.map_err(|source| {
+            self.stats.frames_dropped += 1;
+            ReceiveError::Stream { stream, source }
+        })
+    }
+
+    /// The sender reset the stream (it cancelled a stale frame): the frame is
+    /// dropped, which is not an error.
+    pub fn on_stream_reset(&mut self, stream: StreamId) {
+        self.forget_cancelled(stream);
+        if let Some(s) = self.streams.remove(&stream) {
+            if s.assembler.finish().is_err() {
+                self.stats.frames_dropped += 1;
+            }
+        }
+    }
+
+    /// Index of the newest delivered frame.
+    pub fn last_delivered(&self) -> Option<u64> {
+        self.last_delivered
+    }
+
+    /// Frames currently in flight.
+    pub fn in_flight(&self) -> usize {
+        self.streams.len()
+    }
+
+    /// Statistics to report to the server (`rtt_us` is the caller's to fill).
+    pub fn stats(&self) -> ClientStats {
+        self.stats
+    }
+
+    /// Forgets ordering, e.g. after a new session starts.
+    pub fn reset(&mut self) {
+        self.streams.clear();
+        self.cancelled.clear();
+        self.last_delivered = None;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use glam::{DQuat, DVec3};
+    use half::f16;
+    use protocol::assemble::encode_frame;
+    use protocol::wire::StreamBuffer;
+    use protocol::{
+        BufferKind, Camera, Codec, Frame, FrameMeta, FrameSize, PixelFormat, Pose, Projection,
+    };
+
+    use super::*;
+
+    fn stream_bytes(index: u64) -> Vec<u8> {
+        let size = FrameSize::new(6, 4);
+        let n = 24;
+        let frame = Frame {
+            meta: FrameMeta {
+                index,
+                time: index as f64 / 30.0,
+                camera: Camera::new(
+                    Pose::new(DVec3::new(0.0, 1.0, index as f64), DQuat::IDENTITY),
+                    Projection::perspective(1.0, 1.5, 0.1, 100.0),
+                ),
+                size,
+                host_processing: Duration::from_millis(3),
+                cut: false,
+            },
+            color: vec![[f16::from_f32(index as f32); 4]; n],
+            depth: vec![2.0; n],
+            motion: vec![[0.5, -0.5]; n],
+            extras: vec![],
+        };
+        let buffers = [
+            (BufferKind::Color, PixelFormat::Rgba16Float, Codec::Raw),
+            (BufferKind::Depth, PixelFormat::R32Float, Codec::Zstd),
+            (BufferKind::Motion, PixelFormat::Rg32Float, Codec::Zstd),
+        ]
+        .map(|(kind, format, codec)| StreamBuffer {
+            kind,
+            format,
+            codec,
+        });
+        encode_frame(&frame, &buffers, 1)
+            .unwrap()
+            .to_stream_bytes()
+            .unwrap()
+    }
+
+    fn receiver() -> FrameReceiver {
+        FrameReceiver::new(Limits::default(), 8)
+    }
+
+    #[test]
+    fn frames_are_delivered_in_order_and_late_ones_superseded() {
+        let mut r = receiver();
+        let (a, b, c) = (stream_bytes(1), stream_bytes(2), stream_bytes(3));
+        // Frame 1 arrives in pieces, frame 3 overtakes frame 2.
+        assert!(r.on_data(10, &a[..20]).unwrap().frame.is_none());
+        let d = r.on_data(10, &a[20..]).unwrap();
+        assert_eq!(d.frame.unwrap().header.meta.index, 1);
+        r.on_stream_end(10).unwrap();
+        // Frame 2's header arrives, then all of frame 3.
+        assert!(r.on_data(12, &b[..b.len() / 2]).unwrap().frame.is_none());
+        let d = r.on_data(14, &c).unwrap();
+        assert_eq!(d.frame.unwrap().header.meta.index, 3);
+        assert_eq!(d.cancel, vec![12], "frame 2's stream is superseded");
+        assert_eq!(r.in_flight(), 1, "frame 3's stream until its FIN");
+        r.on_stream_end(14).unwrap();
+        // A complete but older frame on a new stream is late, not delivered.
+        let d = r.on_data(16, &b).unwrap();
+        assert!(d.frame.is_none());
+        let s = r.stats();
+        assert_eq!(s.frames_received, 3);
+        assert_eq!(s.frames_late, 2);
+        assert_eq!(s.frames_dropped, 0);
+        assert_eq!(
+            s.bytes_received,
+            (a.len() + b.len() / 2 + c.len() + b.len()) as u64
+        );
+        assert_eq!(r.last_delivered(), Some(3));
+    }
+
+    #[test]
+    fn stale_headers_are_cancelled_before_their_payloads_arrive() {
+        let mut r = receiver();
+        r.on_data(1, &stream_bytes(5)).unwrap();
+        let old = stream_bytes(4);
+        // Exactly the header message: 8 header bytes plus the body length.
+        let header_len = 8 + u32::from_le_bytes(old[..4].try_into().unwrap()) as usize;
+        let d = r.on_data(2, &old[..header_len]).unwrap();
+        assert_eq!(d.cancel, vec![2]);
+        assert_eq!(r.stats().frames_late, 1);
+        // Bytes the transport still had for the cancelled stream are ignored,
+        // and its FIN is not an error.
+        assert!(r.on_data(2, &old[header_len..]).unwrap().frame.is_none());
+        assert_eq!(r.in_flight(), 1);
+        r.on_stream_end(2).unwrap();
+        assert_eq!(r.stats().frames_dropped, 0);
+    }
+
+    #[test]
+    fn broken_streams_are_errors_and_do_not_disturb_others() {
+        let mut r = receiver();
+        let good = stream_bytes(1);
+        r.on_data(1, &good[..30]).unwrap();
+        // Garbage on another stream.
+        let e = r.on_data(2, &[0xff; 64]).unwrap_err();
+        assert!(matches!(e, ReceiveError::Stream { stream: 2, .. }), "{e}");
+        // A stream that ends mid-frame.
+        r.on_data(3, &stream_bytes(7)[..50]).unwrap();
+        assert!(r.on_stream_end(3).is_err());
+        assert_eq!(r.stats().frames_dropped, 1);
+        // A reset stream is a drop, not an error.
+        r.on_data(4, &stream_bytes(8)[..50]).unwrap();
+        r.on_stream_reset(4);
+        assert_eq!(r.stats().frames_dropped, 2);
+        // The first stream still completes.
+        let d = r.on_data(1, &good[30..]).unwrap();
+        assert_eq!(d.frame.unwrap().decode().unwrap().meta.index, 1);
+    }
+
+    #[test]
+    fn in_flight_streams_are_bounded() {
+        let mut r = FrameReceiver::new(Limits::default(), 2);
+        r.on_data(1, &[1]).unwrap();
+        r.on_data(2, &[1]).unwrap();
+        assert!(matches!(
+            r.on_data(3, &[1]),
+            Err(ReceiveError::TooManyStreams { max: 2 })
+        ));
+        r.on_stream_reset(1);
+        assert!(r.on_data(3, &[1]).is_ok());
+    }
+}

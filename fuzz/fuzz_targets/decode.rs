@@ -1,0 +1,38 @@
+//! Feeds arbitrary bytes to every decoder of the wire format: the one-shot
+//! message decoder, the streaming decoder (in chunks chosen by the input),
+//! and the whole per-frame stream decoder (wire + reassembly + codecs).
+//! Any panic, hang or allocation beyond the limits is a bug.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use protocol::Limits;
+use protocol::assemble::decode_frame_stream;
+use protocol::wire::{Decoder, decode_message};
+
+fuzz_target!(|data: &[u8]| {
+    // Tight limits keep each run's memory small without changing the code paths.
+    let limits = Limits {
+        max_dimension: 512,
+        max_payload: 1 << 20,
+        max_control: 64 << 10,
+    };
+    if let Ok((msg, used)) = decode_message(data, &limits) {
+        assert!(used <= data.len());
+        assert!(msg.validate(&limits).is_ok());
+    }
+    // The first byte picks the chunk size for the streaming decoder.
+    if let Some((&chunk, rest)) = data.split_first() {
+        let mut decoder = Decoder::new(limits);
+        for piece in rest.chunks(usize::from(chunk).max(1)) {
+            decoder.feed(piece);
+            loop {
+                match decoder.next_message() {
+                    Ok(Some(_)) => {}
+                    Ok(None) => break,
+                    Err(_) => return,
+                }
+            }
+        }
+    }
+    let _ = decode_frame_stream(data, &limits);
+});
