@@ -247,9 +247,7 @@ mod tests {
     use half::f16;
     use protocol::assemble::encode_frame;
     use protocol::wire::StreamBuffer;
-    use protocol::{
-        BufferKind, Camera, Codec, Frame, FrameMeta, FrameSize, PixelFormat, Pose, Projection,
-    };
+    use protocol::{Camera, Codec, Frame, FrameMeta, FrameSize, Pose, Projection};
 
     use super::*;
 
@@ -273,16 +271,7 @@ mod tests {
             motion: vec![[0.5, -0.5]; n],
             extras: vec![],
         };
-        let buffers = [
-            (BufferKind::Color, PixelFormat::Rgba16Float, Codec::Raw),
-            (BufferKind::Depth, PixelFormat::R32Float, Codec::Zstd),
-            (BufferKind::Motion, PixelFormat::Rg32Float, Codec::Zstd),
-        ]
-        .map(|(kind, format, codec)| StreamBuffer {
-            kind,
-            format,
-            codec,
-        });
+        let buffers = StreamBuffer::default_set(Codec::Raw);
         encode_frame(&frame, &buffers, 1)
             .unwrap()
             .to_stream_bytes()

@@ -63,31 +63,38 @@ fn gaussian_window() -> [f64; 11] {
     w.map(|v| v / sum)
 }
 
-/// Separable Gaussian blur with clamp-to-edge borders.
-fn blur(src: &[f64], width: usize, height: usize, w: &[f64; 11]) -> Vec<f64> {
-    let mut tmp = vec![0.0; src.len()];
-    for y in 0..height {
-        for x in 0..width {
-            tmp[y * width + x] = (0..11)
-                .map(|k| {
-                    let sx = (x as isize + k as isize - 5).clamp(0, width as isize - 1) as usize;
-                    w[k] * src[y * width + sx]
-                })
-                .sum();
-        }
-    }
+/// One 1-D pass of the window along x (`horizontal`) or y, clamp-to-edge.
+fn blur_pass(
+    src: &[f64],
+    width: usize,
+    height: usize,
+    w: &[f64; 11],
+    horizontal: bool,
+) -> Vec<f64> {
+    let (len, step) = if horizontal {
+        (width, 1)
+    } else {
+        (height, width)
+    };
     let mut out = vec![0.0; src.len()];
     for y in 0..height {
         for x in 0..width {
+            let (pos, base) = if horizontal { (x, y * width) } else { (y, x) };
             out[y * width + x] = (0..11)
                 .map(|k| {
-                    let sy = (y as isize + k as isize - 5).clamp(0, height as isize - 1) as usize;
-                    w[k] * tmp[sy * width + x]
+                    let s = (pos as isize + k as isize - 5).clamp(0, len as isize - 1) as usize;
+                    w[k] * src[base + s * step]
                 })
                 .sum();
         }
     }
     out
+}
+
+/// Separable Gaussian blur with clamp-to-edge borders.
+fn blur(src: &[f64], width: usize, height: usize, w: &[f64; 11]) -> Vec<f64> {
+    let tmp = blur_pass(src, width, height, w, true);
+    blur_pass(&tmp, width, height, w, false)
 }
 
 /// Structural similarity (Wang et al. 2004) with the standard constants

@@ -80,13 +80,7 @@ impl EncodedFrame {
     /// Runs the codecs and builds the [`Frame`].
     pub fn decode(&self) -> Result<Frame, AssembleError> {
         let meta = self.header.meta;
-        let mut frame = Frame {
-            meta,
-            color: Vec::new(),
-            depth: Vec::new(),
-            motion: Vec::new(),
-            extras: Vec::new(),
-        };
+        let mut frame = Frame::empty(meta);
         for (desc, payload) in self.header.buffers.iter().zip(&self.payloads) {
             let raw_len = desc.format.raw_len(meta.size);
             let raw = codec::decode(desc.codec, desc.format, &payload.data, raw_len).map_err(

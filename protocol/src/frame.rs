@@ -240,6 +240,17 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// A frame with `meta` and no pixel data yet, for decoders to fill.
+    pub fn empty(meta: FrameMeta) -> Self {
+        Self {
+            meta,
+            color: Vec::new(),
+            depth: Vec::new(),
+            motion: Vec::new(),
+            extras: Vec::new(),
+        }
+    }
+
     /// Checks metadata and that every buffer has one entry per pixel.
     pub fn validate(&self, limits: &Limits) -> Result<(), ValidationError> {
         self.meta.validate(limits)?;

@@ -9,7 +9,7 @@ use rand::{Rng, SeedableRng};
 
 use protocol::assemble::{decode_frame_stream, encode_frame};
 use protocol::wire::{self, Decoder, Message, StreamBuffer, WireError, decode_message};
-use protocol::{BufferKind, Codec, Limits, PixelFormat};
+use protocol::{Codec, Limits};
 
 /// Applies 1..=4 random edits: bit flips, byte overwrites, truncation,
 /// insertion, duplication of a slice, and rewrites of the length field.
@@ -153,16 +153,7 @@ fn mutated_frame_streams_never_panic() {
             extras: vec![],
         }
     };
-    let buffers = [
-        (BufferKind::Color, PixelFormat::Rgb16Float, Codec::Zstd),
-        (BufferKind::Depth, PixelFormat::R32Float, Codec::Zstd),
-        (BufferKind::Motion, PixelFormat::Rg32Float, Codec::Zstd),
-    ]
-    .map(|(kind, format, codec)| StreamBuffer {
-        kind,
-        format,
-        codec,
-    });
+    let buffers = StreamBuffer::default_set(Codec::Zstd);
     let stream = encode_frame(&frame, &buffers, 1)
         .unwrap()
         .to_stream_bytes()

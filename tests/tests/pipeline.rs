@@ -9,23 +9,14 @@ use glam::{DVec2, DVec3};
 use protocol::assemble::encode_frame;
 use protocol::dump::{DumpReader, DumpWriter, Manifest};
 use protocol::wire::StreamBuffer;
-use protocol::{BufferKind, Codec, FrameSize, Limits, PixelFormat, WorldPoint};
+use protocol::{Codec, FrameSize, Limits, WorldPoint};
 use server::pacer::{Pace, Pacer};
 
 const SIZE: FrameSize = FrameSize::new(64, 36);
 const FPS: f64 = 30.0;
 
 fn buffers() -> [StreamBuffer; 3] {
-    [
-        (BufferKind::Color, PixelFormat::Rgb16Float, Codec::Raw),
-        (BufferKind::Depth, PixelFormat::R32Float, Codec::Zstd),
-        (BufferKind::Motion, PixelFormat::Rg32Float, Codec::Zstd),
-    ]
-    .map(|(kind, format, codec)| StreamBuffer {
-        kind,
-        format,
-        codec,
-    })
+    StreamBuffer::default_set(Codec::Raw)
 }
 
 #[test]

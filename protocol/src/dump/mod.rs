@@ -371,13 +371,7 @@ impl DumpReader {
                 path: exr,
             });
         }
-        let mut frame = Frame {
-            meta,
-            color: Vec::new(),
-            depth: Vec::new(),
-            motion: Vec::new(),
-            extras: Vec::new(),
-        };
+        let mut frame = Frame::empty(meta);
         exr_io::read_exr(&exr, &mut frame)?;
         Ok(frame)
     }

@@ -262,6 +262,29 @@ fn check_kinds(
 }
 
 impl StreamBuffer {
+    /// The default buffer set: color as RGB f16 uncompressed (`color`
+    /// codec chosen by the caller, since color codecs are pluggable), depth
+    /// and motion as f32 with lossless zstd (DESIGN §7).
+    pub fn default_set(color: Codec) -> [StreamBuffer; 3] {
+        [
+            StreamBuffer {
+                kind: BufferKind::Color,
+                format: PixelFormat::Rgb16Float,
+                codec: color,
+            },
+            StreamBuffer {
+                kind: BufferKind::Depth,
+                format: PixelFormat::R32Float,
+                codec: Codec::Zstd,
+            },
+            StreamBuffer {
+                kind: BufferKind::Motion,
+                format: PixelFormat::Rg32Float,
+                codec: Codec::Zstd,
+            },
+        ]
+    }
+
     /// Checks that the format suits the kind.
     pub fn validate(&self) -> Result<(), ValidationError> {
         if !self.kind.allowed_formats().contains(&self.format) {
