@@ -33,6 +33,9 @@ pub enum AssembleError {
     /// A payload arrived before the header.
     #[error("payload before the frame header")]
     HeaderMissing,
+    /// An earlier error ended this stream.
+    #[error("the frame stream already failed")]
+    Poisoned,
     /// A payload belongs to another frame.
     #[error("payload for frame {got} on the stream of frame {expected}")]
     FrameIndexMismatch {
@@ -78,10 +81,38 @@ pub struct EncodedFrame {
 
 impl EncodedFrame {
     /// Runs the codecs and builds the [`Frame`].
+    ///
+    /// The header is validated again and payloads must match it one to one,
+    /// so an `EncodedFrame` built by hand is held to the same rules as one
+    /// from the [`FrameAssembler`]; the result is a validated [`Frame`].
     pub fn decode(&self) -> Result<Frame, AssembleError> {
+        let limits = Limits::default();
+        Message::FrameHeader(self.header.clone())
+            .validate(&limits)
+            .map_err(AssembleError::Invalid)?;
         let meta = self.header.meta;
+        if self.payloads.len() != self.header.buffers.len() {
+            let missing = self
+                .header
+                .buffers
+                .iter()
+                .skip(self.payloads.len())
+                .map(|d| d.kind)
+                .collect();
+            return Err(AssembleError::Incomplete { missing });
+        }
         let mut frame = Frame::empty(meta);
         for (desc, payload) in self.header.buffers.iter().zip(&self.payloads) {
+            if payload.kind != desc.kind {
+                return Err(AssembleError::UnlistedBuffer(payload.kind));
+            }
+            if payload.data.len() as u64 != desc.payload_len {
+                return Err(AssembleError::LengthMismatch {
+                    kind: desc.kind,
+                    expected: desc.payload_len,
+                    got: payload.data.len() as u64,
+                });
+            }
             let raw_len = desc.format.raw_len(meta.size);
             let raw = codec::decode(desc.codec, desc.format, &payload.data, raw_len).map_err(
                 |source| AssembleError::Codec {
@@ -91,6 +122,7 @@ impl EncodedFrame {
             )?;
             frame.set_buffer_bytes(desc.kind, desc.format, &raw)?;
         }
+        frame.validate(&limits)?;
         Ok(frame)
     }
 
@@ -160,6 +192,7 @@ pub struct FrameAssembler {
     header: Option<FrameHeader>,
     payloads: Vec<Option<BufferPayload>>,
     done: bool,
+    failed: bool,
 }
 
 impl FrameAssembler {
@@ -173,14 +206,28 @@ impl FrameAssembler {
         self.header.as_ref()
     }
 
-    /// Takes the next message of the stream (already validated by the wire
-    /// decoder). Returns the frame when it is complete.
+    /// Takes the next message of the stream. Returns the frame when it is
+    /// complete. After any error the assembler stays failed
+    /// ([`AssembleError::Poisoned`]): the stream must be dropped.
     pub fn push(&mut self, msg: Message) -> Result<Option<EncodedFrame>, AssembleError> {
+        if self.failed {
+            return Err(AssembleError::Poisoned);
+        }
+        let result = self.step(msg);
+        if result.is_err() {
+            self.failed = true;
+        }
+        result
+    }
+
+    fn step(&mut self, msg: Message) -> Result<Option<EncodedFrame>, AssembleError> {
         if self.done {
             return Err(AssembleError::Unexpected(msg.kind()));
         }
         match msg {
             Message::FrameHeader(h) if self.header.is_none() => {
+                // Cheap, and keeps the assembler safe when fed by hand.
+                Message::FrameHeader(h.clone()).validate(&Limits::default())?;
                 self.payloads = vec![None; h.buffers.len()];
                 self.header = Some(h);
                 Ok(None)
@@ -332,26 +379,34 @@ mod tests {
     fn payloads_may_arrive_in_any_order_but_must_match_the_header() {
         let frame = sample_frame(7, 8, 8);
         let enc = encode_frame(&frame, &buffers(Codec::Zstd), 1).unwrap();
+        let started = || {
+            let mut a = FrameAssembler::new();
+            a.push(Message::FrameHeader(enc.header.clone())).unwrap();
+            a
+        };
+        let payload = |i: usize| Message::Payload(enc.payloads[i].clone());
         let mut a = FrameAssembler::new();
         assert!(matches!(
-            a.push(Message::Payload(enc.payloads[0].clone())),
+            a.push(payload(0)),
             Err(AssembleError::HeaderMissing)
         ));
-        let mut a = FrameAssembler::new();
-        a.push(Message::FrameHeader(enc.header.clone())).unwrap();
-        assert!(
-            a.push(Message::Payload(enc.payloads[2].clone()))
-                .unwrap()
-                .is_none()
-        );
+        // Any error poisons the stream.
         assert!(matches!(
-            a.push(Message::Payload(enc.payloads[2].clone())),
+            a.push(Message::FrameHeader(enc.header.clone())),
+            Err(AssembleError::Poisoned)
+        ));
+
+        let mut a = started();
+        assert!(a.push(payload(2)).unwrap().is_none());
+        assert!(matches!(
+            a.push(payload(2)),
             Err(AssembleError::DuplicatePayload(BufferKind::Motion))
         ));
+
         let mut wrong = enc.payloads[0].clone();
         wrong.frame_index = 8;
         assert!(matches!(
-            a.push(Message::Payload(wrong)),
+            started().push(Message::Payload(wrong)),
             Err(AssembleError::FrameIndexMismatch {
                 expected: 7,
                 got: 8
@@ -360,7 +415,7 @@ mod tests {
         let mut short = enc.payloads[0].clone();
         short.data.pop();
         assert!(matches!(
-            a.push(Message::Payload(short)),
+            started().push(Message::Payload(short)),
             Err(AssembleError::LengthMismatch { .. })
         ));
         let unlisted = BufferPayload {
@@ -369,23 +424,50 @@ mod tests {
             data: vec![],
         };
         assert!(matches!(
-            a.push(Message::Payload(unlisted)),
+            started().push(Message::Payload(unlisted)),
             Err(AssembleError::UnlistedBuffer(BufferKind::Normal))
         ));
+        let mut second_header = started();
+        assert!(matches!(
+            second_header.push(Message::FrameHeader(enc.header.clone())),
+            Err(AssembleError::Unexpected(MessageKind::FrameHeader))
+        ));
+
+        // Out of order completes; incomplete before that.
+        let mut a = started();
+        a.push(payload(2)).unwrap();
         assert!(
             matches!(a.finish(), Err(AssembleError::Incomplete { ref missing }) if missing.len() == 2)
         );
-        a.push(Message::Payload(enc.payloads[1].clone())).unwrap();
-        let done = a
-            .push(Message::Payload(enc.payloads[0].clone()))
-            .unwrap()
-            .unwrap();
+        a.push(payload(1)).unwrap();
+        let done = a.push(payload(0)).unwrap().unwrap();
         assert_eq!(done.decode().unwrap(), frame);
         a.finish().unwrap();
         assert!(matches!(
-            a.push(Message::Payload(enc.payloads[0].clone())),
+            a.push(payload(0)),
             Err(AssembleError::Unexpected(MessageKind::Payload))
         ));
+    }
+
+    #[test]
+    fn hand_built_encoded_frames_are_checked_too() {
+        let frame = sample_frame(3, 8, 8);
+        let enc = encode_frame(&frame, &buffers(Codec::Raw), 1).unwrap();
+        let mut missing = enc.clone();
+        missing.payloads.pop();
+        assert!(matches!(
+            missing.decode(),
+            Err(AssembleError::Incomplete { .. })
+        ));
+        let mut swapped = enc.clone();
+        swapped.payloads.swap(1, 2);
+        assert!(swapped.decode().is_err());
+        let mut huge = enc.clone();
+        huge.header.meta.size.width = u32::MAX;
+        assert!(matches!(huge.decode(), Err(AssembleError::Invalid(_))));
+        let mut nan = enc;
+        nan.header.meta.camera.pose.position.x = f64::NAN;
+        assert!(matches!(nan.decode(), Err(AssembleError::Invalid(_))));
     }
 
     #[test]

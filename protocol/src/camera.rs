@@ -95,7 +95,7 @@ impl Pose {
 
     /// World → view transform (view space: camera at origin looking down −Z).
     pub fn world_to_view(&self) -> DMat4 {
-        DMat4::from_rotation_translation(self.rotation, self.position).inverse()
+        DMat4::from_rotation_translation(self.rotation.normalize(), self.position).inverse()
     }
 
     /// Checks that every value is finite and the rotation is a unit quaternion.
@@ -259,8 +259,12 @@ impl Window {
         if all.iter().any(|v| v.abs() > MAX_WINDOW_EXTENT) {
             return Err(ValidationError::OutOfRange("window extent"));
         }
-        if !(self.u1 - self.u0 > 1e-6 && self.v1 - self.v0 > 1e-6) {
-            return Err(ValidationError::OutOfRange("window ordering"));
+        // Eq. 5 only ever widens: the window contains the displayed region,
+        // so the crop rectangle always lies inside the image.
+        if !(self.u0 <= -1.0 && self.v0 <= -1.0 && self.u1 >= 1.0 && self.v1 >= 1.0) {
+            return Err(ValidationError::OutOfRange(
+                "window must contain (-1, -1, 1, 1)",
+            ));
         }
         Ok(())
     }
@@ -338,7 +342,9 @@ impl Camera {
     /// points at or behind the camera plane. Points outside the image are
     /// still projected (callers test bounds).
     pub fn project(&self, point: WorldPoint, size: FrameSizeF) -> Option<Projected> {
-        let inv = self.pose.rotation.conjugate();
+        // Validation admits |q| within 1e-3 of 1: normalise so depth and
+        // positions are not scaled by |q|².
+        let inv = self.pose.rotation.normalize().conjugate();
         let (view, depth) = match point {
             WorldPoint::Finite(p) => {
                 let v = inv * (p - self.pose.position);
@@ -369,13 +375,12 @@ impl Camera {
             return None;
         }
         let ray = self.view_ray(pixel, size);
+        let rotation = self.pose.rotation.normalize();
         if depth == f64::INFINITY {
-            Some(WorldPoint::AtInfinity(
-                (self.pose.rotation * ray).normalize(),
-            ))
+            Some(WorldPoint::AtInfinity((rotation * ray).normalize()))
         } else {
             Some(WorldPoint::Finite(
-                self.pose.position + self.pose.rotation * (ray * depth),
+                self.pose.position + rotation * (ray * depth),
             ))
         }
     }
@@ -492,6 +497,49 @@ mod tests {
             )
             .is_none()
         );
+    }
+
+    #[test]
+    fn look_at_centres_the_target_with_up_towards_row_zero() {
+        let c = cam(DVec3::new(4.0, 3.0, -2.0), DVec3::new(-1.0, 0.5, 6.0));
+        let t = c
+            .project(WorldPoint::Finite(DVec3::new(-1.0, 0.5, 6.0)), SIZE)
+            .unwrap();
+        assert!((t.pixel - DVec2::new(SIZE.0 / 2.0, SIZE.1 / 2.0)).length() < 1e-9);
+        let above = c
+            .project(WorldPoint::Finite(DVec3::new(-1.0, 1.5, 6.0)), SIZE)
+            .unwrap();
+        assert!(above.pixel.y < t.pixel.y);
+        // The basis is right-handed and orthonormal.
+        let p = c.pose;
+        assert!((p.right().cross(p.up()) - (-p.forward())).length() < 1e-12);
+        // Looking straight down still works (up parallel to the view axis).
+        let down = Pose::look_at(DVec3::Y, DVec3::ZERO, DVec3::Y);
+        assert!((down.forward() - DVec3::NEG_Y).length() < 1e-12);
+        assert!(down.rotation.is_normalized());
+    }
+
+    #[test]
+    fn clip_matrix_maps_near_to_zero_and_far_to_one() {
+        let mut c = cam(DVec3::ZERO, DVec3::NEG_Z);
+        for far in [1000.0, f64::INFINITY] {
+            c.projection.far = far;
+            let m = c.clip_from_view();
+            let ndc_z = |d: f64| {
+                let v = m * DVec4::new(0.0, 0.0, -d, 1.0);
+                v.z / v.w
+            };
+            assert!(ndc_z(0.1).abs() < 1e-12, "near plane → 0");
+            if far.is_finite() {
+                assert!((ndc_z(far) - 1.0).abs() < 1e-12, "far plane → 1");
+            } else {
+                assert!(
+                    ndc_z(1e12) < 1.0 && ndc_z(1e12) > 1.0 - 1e-9,
+                    "infinity → 1"
+                );
+            }
+            assert!(ndc_z(10.0) > ndc_z(1.0), "farther is larger");
+        }
     }
 
     #[test]
@@ -653,5 +701,29 @@ mod tests {
         let mut c = good;
         c.window.u1 = c.window.u0;
         assert!(c.validate().is_err());
+        let mut c = good;
+        c.window = Window {
+            u0: 0.0,
+            v0: 0.0,
+            u1: 0.5,
+            v1: 0.5,
+        };
+        assert!(
+            c.validate().is_err(),
+            "a window that does not contain the display"
+        );
+        // A rotation slightly off unit length is accepted and does not scale
+        // depth.
+        let mut c = good;
+        c.pose.rotation = c.pose.rotation * 1.0009;
+        assert!(c.validate().is_ok());
+        let p = c.unproject(DVec2::new(3.5, 4.5), 7.0, SIZE).unwrap();
+        assert!((c.project(p, SIZE).unwrap().depth - 7.0).abs() < 1e-9);
+        let (WorldPoint::Finite(a), Some(WorldPoint::Finite(b))) =
+            (p, good.unproject(DVec2::new(3.5, 4.5), 7.0, SIZE))
+        else {
+            panic!("finite depth gives finite points");
+        };
+        assert!((a - b).length() < 1e-9);
     }
 }

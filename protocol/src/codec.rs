@@ -74,7 +74,7 @@ impl Codec {
 pub fn zstd_compress_bound(src: u64) -> u64 {
     const KB128: u64 = 128 << 10;
     let margin = if src < KB128 { (KB128 - src) >> 11 } else { 0 };
-    src + (src >> 8) + margin
+    src.saturating_add(src >> 8).saturating_add(margin)
 }
 
 /// Encodes `raw` pixels of `format` with `codec` at the default zstd level.
@@ -206,7 +206,7 @@ mod tests {
     }
 
     #[test]
-    fn decode_refuses_wrong_sizes_without_overallocating() {
+    fn decode_refuses_sizes_that_disagree_with_the_header() {
         let raw = depth_like(1000);
         let enc = encode(Codec::Zstd, PixelFormat::R32Float, &raw).unwrap();
         // Announcing fewer bytes than the data holds: zstd stops at the cap.

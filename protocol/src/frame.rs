@@ -170,7 +170,8 @@ impl PixelFormat {
 
     /// Size of an uncompressed `size` image in this format.
     pub fn raw_len(self, size: FrameSize) -> u64 {
-        size.pixels() * u64::from(self.bytes_per_pixel())
+        size.pixels()
+            .saturating_mul(u64::from(self.bytes_per_pixel()))
     }
 }
 
@@ -256,13 +257,14 @@ impl Frame {
         self.meta.validate(limits)?;
         let n = self.meta.size.pixels();
         let check = |kind, len: usize, bpp: u64| {
-            if len as u64 != n * bpp {
+            let want = n.saturating_mul(bpp);
+            if len as u64 != want {
                 Err(ValidationError::PayloadLength {
                     kind,
                     codec: Codec::Raw,
                     len: len as u64,
-                    min: n * bpp,
-                    max: n * bpp,
+                    min: want,
+                    max: want,
                 })
             } else {
                 Ok(())

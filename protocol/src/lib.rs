@@ -136,8 +136,10 @@ impl Default for Limits {
     fn default() -> Self {
         Self {
             max_dimension: Self::MAX_DIMENSION,
-            // The largest raw buffer: 8192² pixels at 8 bytes (RGBA f16, RG f32).
-            max_payload: 8192 * 8192 * 8,
+            // The largest raw buffer (8192² pixels at 8 bytes: RGBA f16, RG
+            // f32), encoded by the codec that can grow it most (zstd on
+            // incompressible data).
+            max_payload: codec::zstd_compress_bound(8192 * 8192 * 8),
             max_control: 64 * 1024,
         }
     }

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use glam::{DQuat, DVec3};
 use half::f16;
-use protocol::dump::{DumpError, DumpReader, DumpWriter, Manifest, frame_paths};
+use protocol::dump::{DumpError, DumpReader, DumpWriter, Manifest, PANIC_DETAIL, frame_paths};
 use protocol::frame::ExtraBuffer;
 use protocol::{BufferKind, Camera, Frame, FrameMeta, FrameSize, Pose, Projection, Window};
 
@@ -253,8 +253,17 @@ fn truncated_and_corrupted_exr_files_are_errors_not_panics() {
         let mut b = original.clone();
         b[i] ^= 0xa5;
         fs::write(&exr, &b).unwrap();
-        if r.read_frame(0).is_err() {
-            errors += 1;
+        match r.read_frame(0) {
+            Ok(_) => {}
+            Err(DumpError::Exr { detail, .. }) => {
+                assert_ne!(detail, PANIC_DETAIL, "the EXR decoder panicked at byte {i}");
+                errors += 1;
+            }
+            Err(e @ (DumpError::SizeMismatch { .. } | DumpError::MissingChannel { .. })) => {
+                let _ = e;
+                errors += 1;
+            }
+            Err(e) => panic!("unexpected error kind at byte {i}: {e}"),
         }
     }
     assert!(errors > 0);
@@ -338,4 +347,40 @@ fn bad_manifests_and_metadata_are_typed_errors() {
     ));
     fs::write(&json, &meta).unwrap();
     assert!(r.read_frame(0).is_ok());
+}
+
+#[test]
+fn frames_iterator_checks_index_order() {
+    let dir = tempfile::tempdir().unwrap();
+    write_dump(dir.path(), 3);
+    // Rewrite frame 2's index to go backwards.
+    let (_, json) = frame_paths(dir.path(), 2);
+    let text = fs::read_to_string(&json)
+        .unwrap()
+        .replace("\"index\": 2", "\"index\": 1");
+    fs::write(&json, text).unwrap();
+    let r = DumpReader::open(dir.path()).unwrap();
+    let results: Vec<_> = r.frames().collect();
+    assert!(results[0].is_ok() && results[1].is_ok());
+    assert!(matches!(
+        results[2],
+        Err(DumpError::IndexOrder {
+            previous: 1,
+            got: 1
+        })
+    ));
+}
+
+#[cfg(unix)]
+#[test]
+fn special_files_are_refused_not_read_forever() {
+    let dir = tempfile::tempdir().unwrap();
+    write_dump(dir.path(), 1);
+    let m = dir.path().join("manifest.json");
+    fs::remove_file(&m).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", &m).unwrap();
+    assert!(matches!(
+        DumpReader::open(dir.path()),
+        Err(DumpError::Io { .. })
+    ));
 }

@@ -207,3 +207,15 @@ fn trailing_bytes_inside_a_body_are_refused() {
         Err(WireError::TrailingBytes { extra: 1, .. })
     ));
 }
+
+#[test]
+fn a_failed_decoder_stays_failed_and_buffers_nothing_more() {
+    let mut d = Decoder::new(Limits::default());
+    d.feed(&[0xff; 16]);
+    assert!(d.next_message().is_err());
+    assert!(d.has_failed());
+    assert!(!d.is_at_boundary(), "a failed stream is not a clean end");
+    d.feed(&encode(&Message::Ping(Ping { seq: 1, sent_us: 1 })).unwrap());
+    assert_eq!(d.buffered(), 0, "bytes after the failure are not kept");
+    assert!(matches!(d.next_message(), Err(WireError::Poisoned)));
+}

@@ -40,6 +40,9 @@ pub fn channel_names(kind: BufferKind) -> &'static [&'static str] {
     }
 }
 
+/// Detail of the error reported when the `exr` decoder panics.
+pub const PANIC_DETAIL: &str = "decoder panicked on this file";
+
 /// The channel list type `exr` wants.
 type SmallChannels = SmallVec<[AnyChannel<FlatSamples>; 4]>;
 
@@ -94,7 +97,18 @@ pub fn write_exr(path: &Path, frame: &Frame) -> Result<(), DumpError> {
 /// decoded.
 pub fn read_exr(path: &Path, frame: &mut Frame) -> Result<(), DumpError> {
     let size = frame.meta.size;
-    let meta = MetaData::read_from_file(path, false).map_err(|e| DumpError::exr(path, e))?;
+    // Opening first turns a missing file into an I/O "not found" error that
+    // the reader reports as a missing frame.
+    std::fs::File::open(path).map_err(|source| DumpError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    // `exr` is a pure-Rust decoder that returns errors for bad files; the
+    // unwind guards here and below are a last line of defence so a decoder
+    // bug on a corrupt file becomes an error, never a crash of the server.
+    let meta = std::panic::catch_unwind(|| MetaData::read_from_file(path, false))
+        .map_err(|_| DumpError::exr_msg(path, PANIC_DETAIL))?
+        .map_err(|e| DumpError::exr(path, e))?;
     let header = meta
         .headers
         .first()
@@ -128,9 +142,6 @@ pub fn read_exr(path: &Path, frame: &mut Frame) -> Result<(), DumpError> {
         }
     }
 
-    // `exr` is a pure-Rust decoder that returns errors for bad files; the
-    // unwind guard is a last line of defence so a decoder bug on a corrupt
-    // file becomes an error, never a crash of the server.
     let read = std::panic::catch_unwind(|| {
         read()
             .no_deep_data()
@@ -140,7 +151,7 @@ pub fn read_exr(path: &Path, frame: &mut Frame) -> Result<(), DumpError> {
             .all_attributes()
             .from_file(path)
     })
-    .map_err(|_| DumpError::exr_msg(path, "decoder panicked on this file"))?
+    .map_err(|_| DumpError::exr_msg(path, PANIC_DETAIL))?
     .map_err(|e| DumpError::exr(path, e))?;
     let layer = &read.layer_data;
     if layer.size.0 != size.width as usize || layer.size.1 != size.height as usize {

@@ -14,8 +14,10 @@
 //! window may be larger (its JSON says so) — a frame with the plain window
 //! must match it.
 //!
-//! The [`DumpWriter`] rewrites the manifest atomically after every frame, so
-//! an interrupted recording is still a valid dump of the frames so far. The
+//! The [`DumpWriter`] rewrites the manifest atomically (a synced temporary
+//! file and a rename) after every frame, so an interrupted recording, even by
+//! a crash, is still a valid dump of the frames so far. Color is stored as
+//! RGB: alpha is not part of the data contract and reads back as 1. The
 //! [`DumpReader`] loads one frame at a time, checks every file's size before
 //! reading it, and turns missing, truncated or corrupt files into
 //! [`DumpError`]s.
@@ -23,11 +25,12 @@
 mod exr_io;
 
 use std::fs;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-pub use exr_io::channel_names;
+pub use exr_io::{PANIC_DETAIL, channel_names};
 
 use crate::frame::{Frame, FrameMeta, FrameSize};
 use crate::{CONVENTIONS_VERSION, Limits, ValidationError};
@@ -264,27 +267,70 @@ pub fn frame_paths(dir: &Path, position: u64) -> (PathBuf, PathBuf) {
     )
 }
 
-/// Reads a whole small file after checking its size against `max`.
+/// Reads a whole small regular file, never more than `max` bytes: the file
+/// is opened once and the read itself is capped, so a FIFO, a device or a
+/// file that grows meanwhile cannot exhaust memory.
 fn read_capped(path: &Path, max: u64) -> Result<Vec<u8>, DumpError> {
-    let len = fs::metadata(path)
-        .map_err(|e| DumpError::io(path, e))?
-        .len();
-    if len > max {
+    let file = fs::File::open(path).map_err(|e| DumpError::io(path, e))?;
+    let meta = file.metadata().map_err(|e| DumpError::io(path, e))?;
+    if !meta.is_file() {
+        return Err(DumpError::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file"),
+        ));
+    }
+    let mut bytes = Vec::with_capacity(meta.len().min(max) as usize);
+    file.take(max + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| DumpError::io(path, e))?;
+    if bytes.len() as u64 > max {
         return Err(DumpError::TooLarge {
             path: path.to_owned(),
-            len,
+            len: meta.len().max(bytes.len() as u64),
             max,
         });
     }
-    fs::read(path).map_err(|e| DumpError::io(path, e))
+    Ok(bytes)
 }
 
-/// Writes `bytes` to `path` through a temporary file and a rename, so readers
-/// never see a half-written file.
+/// Maps "file not found" to [`DumpError::MissingFrame`], other errors as is.
+fn missing_as_frame(e: DumpError, position: u64) -> DumpError {
+    match e {
+        DumpError::Io { path, source } if source.kind() == std::io::ErrorKind::NotFound => {
+            DumpError::MissingFrame { position, path }
+        }
+        other => other,
+    }
+}
+
+/// Flushes a written file to stable storage.
+fn sync_file(path: &Path) -> Result<(), DumpError> {
+    fs::File::open(path)
+        .and_then(|f| f.sync_all())
+        .map_err(|e| DumpError::io(path, e))
+}
+
+/// Flushes a directory entry change (a rename) to stable storage. Best
+/// effort: not every platform can open a directory for syncing.
+fn sync_dir(dir: &Path) {
+    if let Ok(d) = fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+}
+
+/// Writes `bytes` to `path` through a synced temporary file and a rename, so
+/// readers never see a half-written file, even after a crash.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), DumpError> {
     let tmp = path.with_extension("tmp");
-    fs::write(&tmp, bytes).map_err(|e| DumpError::io(&tmp, e))?;
-    fs::rename(&tmp, path).map_err(|e| DumpError::io(path, e))
+    let mut f = fs::File::create(&tmp).map_err(|e| DumpError::io(&tmp, e))?;
+    f.write_all(bytes)
+        .and_then(|()| f.sync_all())
+        .map_err(|e| DumpError::io(&tmp, e))?;
+    fs::rename(&tmp, path).map_err(|e| DumpError::io(path, e))?;
+    if let Some(dir) = path.parent() {
+        sync_dir(dir);
+    }
+    Ok(())
 }
 
 /// Streams frames out of a dump, one at a time.
@@ -335,13 +381,8 @@ impl DumpReader {
             });
         }
         let (_, json) = frame_paths(&self.dir, position);
-        if !json.exists() {
-            return Err(DumpError::MissingFrame {
-                position,
-                path: json,
-            });
-        }
-        let bytes = read_capped(&json, MAX_FRAME_JSON_BYTES)?;
+        let bytes =
+            read_capped(&json, MAX_FRAME_JSON_BYTES).map_err(|e| missing_as_frame(e, position))?;
         let meta: FrameMeta = serde_json::from_slice(&bytes).map_err(|source| DumpError::Json {
             path: json.clone(),
             source,
@@ -365,20 +406,30 @@ impl DumpReader {
     pub fn read_frame(&self, position: u64) -> Result<Frame, DumpError> {
         let meta = self.read_meta(position)?;
         let (exr, _) = frame_paths(&self.dir, position);
-        if !exr.exists() {
-            return Err(DumpError::MissingFrame {
-                position,
-                path: exr,
-            });
-        }
         let mut frame = Frame::empty(meta);
-        exr_io::read_exr(&exr, &mut frame)?;
+        exr_io::read_exr(&exr, &mut frame).map_err(|e| missing_as_frame(e, position))?;
         Ok(frame)
     }
 
     /// Iterates over every frame in order, reading each when it is reached.
+    ///
+    /// Frame indices must increase strictly; a frame that breaks the order
+    /// is an [`DumpError::IndexOrder`] item.
     pub fn frames(&self) -> impl Iterator<Item = Result<Frame, DumpError>> + '_ {
-        (0..self.len()).map(|i| self.read_frame(i))
+        let mut previous = None;
+        (0..self.len()).map(move |i| {
+            let frame = self.read_frame(i)?;
+            if let Some(p) = previous {
+                if frame.meta.index <= p {
+                    return Err(DumpError::IndexOrder {
+                        previous: p,
+                        got: frame.meta.index,
+                    });
+                }
+            }
+            previous = Some(frame.meta.index);
+            Ok(frame)
+        })
     }
 }
 
@@ -400,12 +451,21 @@ impl DumpWriter {
             ..manifest
         };
         manifest.validate()?;
-        let manifest_path = dir.join("manifest.json");
-        if manifest_path.exists() {
-            return Err(DumpError::AlreadyExists(dir));
-        }
         let frames = dir.join("frames");
         fs::create_dir_all(&frames).map_err(|e| DumpError::io(&frames, e))?;
+        // Claim the directory atomically: a second writer fails here.
+        let manifest_path = dir.join("manifest.json");
+        match fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&manifest_path)
+        {
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                return Err(DumpError::AlreadyExists(dir));
+            }
+            Err(e) => return Err(DumpError::io(&manifest_path, e)),
+        }
         let writer = Self {
             dir,
             manifest,
@@ -450,6 +510,7 @@ impl DumpWriter {
         let (exr, json) = frame_paths(&self.dir, self.manifest.frame_count);
         let tmp = exr.with_extension("exr.tmp");
         exr_io::write_exr(&tmp, frame)?;
+        sync_file(&tmp)?;
         fs::rename(&tmp, &exr).map_err(|e| DumpError::io(&exr, e))?;
         let meta = serde_json::to_vec_pretty(&frame.meta).map_err(|source| DumpError::Json {
             path: json.clone(),

@@ -93,7 +93,7 @@ impl MessageKind {
     /// The largest body this kind may have under `limits`.
     pub fn max_body(self, limits: &Limits) -> u64 {
         match self {
-            MessageKind::Payload => limits.max_payload + PAYLOAD_HEAD_MAX,
+            MessageKind::Payload => limits.max_payload.saturating_add(PAYLOAD_HEAD_MAX),
             _ => u64::from(limits.max_control),
         }
     }
@@ -307,7 +307,8 @@ pub fn parse_header(
     }
     let kind = MessageKind::from_tag(tag).ok_or(WireError::UnknownKind(tag))?;
     let max = kind.max_body(limits);
-    if u64::from(len) > max {
+    // The body plus header must also fit a usize (32-bit targets).
+    if u64::from(len) > max || (len as usize).checked_add(HEADER_LEN).is_none() {
         return Err(WireError::TooLong {
             kind,
             len: u64::from(len),
@@ -415,6 +416,9 @@ impl Decoder {
 
     /// Appends bytes received from the transport.
     pub fn feed(&mut self, bytes: &[u8]) {
+        if self.failed {
+            return;
+        }
         if self.pos > 0 && self.pos >= self.buf.len() / 2 {
             self.buf.drain(..self.pos);
             self.pos = 0;
@@ -466,8 +470,14 @@ impl Decoder {
         self.buf.len() - self.pos
     }
 
-    /// True when no partial message is buffered (a clean end of stream).
+    /// True when no partial message is buffered and no error occurred (a
+    /// clean end of stream).
     pub fn is_at_boundary(&self) -> bool {
-        self.buffered() == 0
+        !self.failed && self.buffered() == 0
+    }
+
+    /// True once an error has poisoned the decoder.
+    pub fn has_failed(&self) -> bool {
+        self.failed
     }
 }
