@@ -715,7 +715,7 @@ mod tests {
         // A rotation slightly off unit length is accepted and does not scale
         // depth.
         let mut c = good;
-        c.pose.rotation = c.pose.rotation * 1.0009;
+        c.pose.rotation *= 1.0009;
         assert!(c.validate().is_ok());
         let p = c.unproject(DVec2::new(3.5, 4.5), 7.0, SIZE).unwrap();
         assert!((c.project(p, SIZE).unwrap().depth - 7.0).abs() < 1e-9);
