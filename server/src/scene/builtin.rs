@@ -1,0 +1,52 @@
+//! The scenes shipped in `server/scenes/`, embedded in the binary so
+//! `builtin:NAME` works from anywhere. Each file starts with a comment that
+//! says which challenge it stresses.
+
+/// `(name, RON source)` of every built-in scene.
+pub const SCENES: &[(&str, &str)] = &[
+    ("default", include_str!("../../scenes/default.ron")),
+    ("pan", include_str!("../../scenes/pan.ron")),
+    ("dolly", include_str!("../../scenes/dolly.ron")),
+    ("crossing", include_str!("../../scenes/crossing.ron")),
+    (
+        "moving_light",
+        include_str!("../../scenes/moving_light.ron"),
+    ),
+    ("sky", include_str!("../../scenes/sky.ron")),
+    ("thin", include_str!("../../scenes/thin.ron")),
+    (
+        "fast_rotation",
+        include_str!("../../scenes/fast_rotation.ron"),
+    ),
+    ("translucent", include_str!("../../scenes/translucent.ron")),
+    ("cut", include_str!("../../scenes/cut.ron")),
+    ("huge", include_str!("../../scenes/huge.ron")),
+];
+
+/// The RON source of a built-in scene.
+pub fn source(name: &str) -> Option<&'static str> {
+    SCENES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
+}
+
+/// Names of all built-in scenes.
+pub fn names() -> impl Iterator<Item = &'static str> {
+    SCENES.iter().map(|(n, _)| *n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    #[test]
+    fn every_builtin_scene_parses_and_validates() {
+        for (name, src) in SCENES {
+            let s = Scene::from_ron(src, name).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(&s.name, name);
+            assert!(!s.description.is_empty(), "{name} says what it stresses");
+            let st = s.evaluate(1.25);
+            assert_eq!(st.models.len(), s.instances().len());
+            assert!(st.eye.is_finite() && st.target.is_finite());
+        }
+    }
+}
