@@ -7,6 +7,8 @@
 //! * [`wire`]: versioned, length-prefixed messages (bincode 2) and a sans-IO
 //!   decoder; [`assemble`] turns one frame's messages back into a frame.
 //! * [`dump`]: the on-disk dump format (OpenEXR + JSON).
+//! * [`display`]: the one fixed display transform (exposure 1, Reinhard,
+//!   sRGB) that presenters, PNG output and quality metrics all use.
 //!
 //! # The conventions in one place (DESIGN §3)
 //!
@@ -27,6 +29,7 @@
 pub mod assemble;
 pub mod camera;
 pub mod codec;
+pub mod display;
 pub mod dump;
 pub mod frame;
 pub mod wire;

@@ -2,10 +2,13 @@
 //!
 //! * [`scene`]: scene files (RON): camera paths, objects, animation,
 //!   materials, lights, and the effects a scene needs;
+//! * [`render`]: the wgpu forward renderer (color, linear depth, motion),
+//!   building only the passes a scene's effects need;
 //! * [`pacer`]: sans-IO pacing of a frame sequence by simulation time, with
 //!   stale-frame skipping when the sender falls behind;
 //! * [`inspect`]: a health check of a dump on disk (`server inspect DIR`).
 
 pub mod inspect;
 pub mod pacer;
+pub mod render;
 pub mod scene;

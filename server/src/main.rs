@@ -1,10 +1,14 @@
 //! `server`: the frame server's command line.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use protocol::FrameSize;
+use protocol::dump::{DumpWriter, Manifest};
+use server::render::{Renderer, plan};
+use server::scene::{Scene, builtin};
 
 #[derive(Parser)]
 #[command(version, about = "Frame-generation streaming server")]
@@ -15,6 +19,38 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Render a scene into a dump (OpenEXR + JSON per frame).
+    Record {
+        /// `builtin:NAME` or a path to a RON scene file.
+        #[arg(default_value = "builtin:default")]
+        scene: String,
+        /// Output directory (must not hold a dump yet).
+        #[arg(long, short)]
+        out: PathBuf,
+        /// Frames per second of the recording.
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// Size as WIDTHxHEIGHT.
+        #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+        size: FrameSize,
+        /// Duration in seconds.
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+        /// First frame index (time = index / fps).
+        #[arg(long, default_value_t = 0)]
+        start: u64,
+        /// Also write display-encoded PNGs of the color to OUT/png/.
+        #[arg(long)]
+        png: bool,
+    },
+    /// Show what a scene declares and which passes it builds.
+    Info {
+        /// `builtin:NAME` or a path; omit with --list.
+        scene: Option<String>,
+        /// List the built-in scenes.
+        #[arg(long)]
+        list: bool,
+    },
     /// Read every frame of a dump and report its contents and any problem.
     Inspect {
         /// The dump directory (holding manifest.json).
@@ -22,16 +58,164 @@ enum Command {
     },
 }
 
+fn parse_size(s: &str) -> Result<FrameSize, String> {
+    let (w, h) = s
+        .split_once('x')
+        .ok_or("expected WIDTHxHEIGHT, e.g. 1280x720")?;
+    let w: u32 = w.parse().map_err(|e| format!("width: {e}"))?;
+    let h: u32 = h.parse().map_err(|e| format!("height: {e}"))?;
+    protocol::Limits::default()
+        .check_size(w, h)
+        .map_err(|e| e.to_string())?;
+    Ok(FrameSize::new(w, h))
+}
+
 fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .init();
     match Cli::parse().command {
+        Command::Record {
+            scene,
+            out,
+            fps,
+            size,
+            seconds,
+            start,
+            png,
+        } => record(&scene, &out, fps, size, seconds, start, png),
+        Command::Info { scene, list } => info(scene.as_deref(), list),
         Command::Inspect { dir } => inspect(&dir),
     }
 }
 
-fn inspect(dir: &std::path::Path) -> anyhow::Result<()> {
+/// Directory that relative glTF paths of a scene resolve against.
+fn scene_base(spec: &str) -> PathBuf {
+    match spec.strip_prefix("builtin:") {
+        Some(_) => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes"),
+        None => Path::new(spec)
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default(),
+    }
+}
+
+fn progress(len: u64, what: &str) -> ProgressBar {
+    let style = ProgressStyle::with_template(&format!(
+        "{{bar:40}} {{pos}}/{{len}} {what} {{elapsed}} eta {{eta}}"
+    ))
+    .unwrap_or_else(|_| ProgressStyle::default_bar());
+    ProgressBar::new(len).with_style(style)
+}
+
+fn record(
+    spec: &str,
+    out: &Path,
+    fps: f64,
+    size: FrameSize,
+    seconds: f64,
+    start: u64,
+    png: bool,
+) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        fps.is_finite() && fps > 0.0 && fps <= 1000.0,
+        "fps must be in (0, 1000]"
+    );
+    anyhow::ensure!(seconds.is_finite() && seconds > 0.0, "seconds must be > 0");
+    let scene = Scene::load(spec)?;
+    let frames = (seconds * fps).round().max(1.0) as u64;
+    let mut renderer = Renderer::new(scene, size, &scene_base(spec))?;
+    let source = format!(
+        "server record {spec} --fps {fps} --size {}x{} --seconds {seconds} --start {start}; adapter {} ({:?}); passes {:?}",
+        size.width,
+        size.height,
+        renderer.adapter().name,
+        renderer.adapter().backend,
+        renderer.passes()
+    );
+    let mut writer = DumpWriter::create(out, Manifest::new(fps, size, source))?;
+    if png {
+        std::fs::create_dir_all(out.join("png"))?;
+    }
+    let bar = progress(frames, "frames");
+    let mut total = std::time::Duration::ZERO;
+    for k in 0..frames {
+        let index = start + k;
+        let frame = renderer.render(index, fps)?;
+        total += frame.meta.host_processing;
+        if png {
+            let path = out.join("png").join(format!("{k:06}.png"));
+            write_png(&path, &frame)?;
+        }
+        writer.write_frame(&frame)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    writer.finish()?;
+    println!(
+        "{}: {frames} frames of {spec} at {}x{}, {:.1} ms/frame rendering (submit + readback)",
+        out.display(),
+        size.width,
+        size.height,
+        total.as_secs_f64() * 1000.0 / frames as f64
+    );
+    Ok(())
+}
+
+fn write_png(path: &Path, frame: &protocol::Frame) -> anyhow::Result<()> {
+    let size = frame.meta.size;
+    let img = protocol::display::display_encode(size.width, size.height, &frame.color)
+        .context("color buffer does not match the frame size")?;
+    image::save_buffer(
+        path,
+        &img.to_rgb8(),
+        size.width,
+        size.height,
+        image::ExtendedColorType::Rgb8,
+    )
+    .with_context(|| format!("writing {}", path.display()))
+}
+
+fn info(spec: Option<&str>, list: bool) -> anyhow::Result<()> {
+    if list || spec.is_none() {
+        for name in builtin::names() {
+            let s = Scene::load(&format!("builtin:{name}"))?;
+            println!("builtin:{name:<15} {}", s.description);
+        }
+        return Ok(());
+    }
+    let spec = spec.unwrap_or_default();
+    let s = Scene::load(spec)?;
+    println!("{} — {}", s.name, s.description);
+    println!("effects: {:?}", s.effects);
+    println!("passes:  {:?}", plan(&s));
+    println!("origin:  {:?}", s.origin);
+    println!("camera:  fov {}°, {:?}", s.camera.fov_y_deg, s.camera.path);
+    println!(
+        "objects: {} ({} drawn instances)",
+        s.objects.len(),
+        s.instances().len()
+    );
+    for o in &s.objects {
+        println!(
+            "  {:<14} {:?} material {:?} animations {}",
+            o.name,
+            o.mesh,
+            o.material,
+            o.animation.len()
+        );
+    }
+    println!("lights:  {}", s.lights.len());
+    for l in &s.lights {
+        println!(
+            "  {:?} intensity {} shadows {} motion {:?}",
+            l.kind, l.intensity, l.shadows, l.motion
+        );
+    }
+    Ok(())
+}
+
+fn inspect(dir: &Path) -> anyhow::Result<()> {
     let reader = protocol::dump::DumpReader::open(dir)
         .with_context(|| format!("opening {}", dir.display()))?;
     let m = reader.manifest();
@@ -46,10 +230,7 @@ fn inspect(dir: &std::path::Path) -> anyhow::Result<()> {
         m.conventions_version,
         m.source
     );
-    let bar = ProgressBar::new(reader.len()).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} frames {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = progress(reader.len(), "frames");
     let report = server::inspect::inspect(&reader, |i| bar.set_position(i));
     bar.finish_and_clear();
     println!(

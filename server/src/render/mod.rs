@@ -1,0 +1,553 @@
+//! The wgpu forward renderer (DESIGN §10): the ground truth every quality
+//! measurement compares against. For each frame it outputs HDR linear color,
+//! linear view depth (`+inf` for sky), motion vectors current → previous in
+//! pixels (from every object's previous-frame transform and the previous
+//! camera), and the camera and time.
+//!
+//! It builds only the passes the scene's effects call for ([`plan`]):
+//!
+//! | pass          | built when                | writes                          |
+//! |---------------|---------------------------|---------------------------------|
+//! | `Shadow`      | `shadows`                 | shadow map (`shadow.wgsl`)      |
+//! | `Opaque`      | always                    | color, depth, motion (`surface.wgsl`) |
+//! | `Background`  | always                    | sky or flat color, +inf, rotation-only motion (`background.wgsl`) |
+//! | `Translucent` | `translucency`            | blended color (`surface.wgsl`)  |
+//!
+//! `specular` and `sky` are shader features of the opaque and background
+//! passes; `moving_lights` is data. Positions are camera-relative in `f32`
+//! after `f64` math on the CPU, so huge worlds keep sub-pixel motion.
+
+mod gpu;
+mod passes;
+mod targets;
+mod uniforms;
+
+use std::path::Path;
+use std::time::Instant;
+
+use glam::{DMat4, DVec3};
+use wgpu::util::DeviceExt;
+
+pub use gpu::Gpu;
+
+use crate::scene::{Effect, Instance, Scene, SceneError, SceneState, mesh::Mesh};
+use protocol::frame::ExtraBuffer;
+use protocol::{BufferKind, Camera, Frame, FrameMeta, FrameSize, Pose, Projection};
+use targets::{SHADOW_FORMAT, Targets};
+use uniforms::{FrameInputs, OBJECT_STRIDE};
+
+/// Side of the square shadow map, texels.
+pub const SHADOW_MAP_SIZE: u32 = 2048;
+
+/// A pass of the render graph.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Pass {
+    /// Depth from the shadow-casting light.
+    Shadow,
+    /// Opaque geometry into color, depth and motion.
+    Opaque,
+    /// Pixels without geometry: sky or flat color, +inf depth.
+    Background,
+    /// Alpha-blended geometry, back to front.
+    Translucent,
+}
+
+/// The passes a scene needs, in execution order.
+pub fn plan(scene: &Scene) -> Vec<Pass> {
+    let mut passes = Vec::with_capacity(4);
+    if scene.has(Effect::Shadows) {
+        passes.push(Pass::Shadow);
+    }
+    passes.push(Pass::Opaque);
+    passes.push(Pass::Background);
+    if scene.has(Effect::Translucency) {
+        passes.push(Pass::Translucent);
+    }
+    passes
+}
+
+/// Why rendering failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// No GPU adapter (install Mesa's lavapipe: `mesa-vulkan-drivers`).
+    #[error("no GPU adapter: {0} (on Debian: apt-get install mesa-vulkan-drivers libvulkan1)")]
+    NoAdapter(String),
+    /// Device creation or a device operation failed.
+    #[error("GPU device: {0}")]
+    Device(String),
+    /// The scene's meshes could not be built.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// The requested size is unusable.
+    #[error("frame size {0}x{1} is outside 1..={2}")]
+    BadSize(u32, u32, u32),
+}
+
+struct GpuMesh {
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    count: u32,
+    /// Object-space bounding sphere (centre, radius).
+    bounds: (DVec3, f64),
+}
+
+/// Renders frames of one scene at one size.
+pub struct Renderer {
+    gpu: Gpu,
+    scene: Scene,
+    passes: Vec<Pass>,
+    size: FrameSize,
+    instances: Vec<Instance>,
+    meshes: Vec<GpuMesh>,
+    opaque: wgpu::RenderPipeline,
+    background: wgpu::RenderPipeline,
+    shadow: Option<(wgpu::RenderPipeline, wgpu::Texture)>,
+    translucent: Option<wgpu::RenderPipeline>,
+    shadow_bind: wgpu::BindGroup,
+    frame_buffer: wgpu::Buffer,
+    frame_bind: wgpu::BindGroup,
+    object_buffer: wgpu::Buffer,
+    object_bind: wgpu::BindGroup,
+    targets: Targets,
+    last_ids: Vec<u32>,
+}
+
+impl Renderer {
+    /// Prepares a renderer for `scene` at `size`: GPU, meshes, and the
+    /// pipelines of the planned passes only. `base` resolves glTF paths.
+    pub fn new(scene: Scene, size: FrameSize, base: &Path) -> Result<Self, RenderError> {
+        let max = protocol::Limits::MAX_DIMENSION;
+        if size.width == 0 || size.height == 0 || size.width > max || size.height > max {
+            return Err(RenderError::BadSize(size.width, size.height, max));
+        }
+        let gpu = Gpu::new()?;
+        let device = &gpu.device;
+        let passes = plan(&scene);
+        let layouts = passes::Layouts::new(device);
+        let meshes = scene
+            .objects
+            .iter()
+            .map(|o| Ok(upload(device, &o.mesh.build(base)?)))
+            .collect::<Result<Vec<_>, SceneError>>()?;
+        let instances = scene.instances();
+
+        let shadow = passes.contains(&Pass::Shadow).then(|| {
+            let map = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("shadow map"),
+                size: wgpu::Extent3d {
+                    width: SHADOW_MAP_SIZE,
+                    height: SHADOW_MAP_SIZE,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: SHADOW_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            });
+            (passes::shadow(device, &layouts), map)
+        });
+        // Without a shadow pass the shader never samples the map, but the
+        // layout still needs a texture: a 1×1 one.
+        let dummy;
+        let shadow_view = match &shadow {
+            Some((_, map)) => map.create_view(&Default::default()),
+            None => {
+                dummy = device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("no shadow map"),
+                    size: wgpu::Extent3d {
+                        width: 1,
+                        height: 1,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: SHADOW_FORMAT,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                });
+                dummy.create_view(&Default::default())
+            }
+        };
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("shadow"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            compare: Some(wgpu::CompareFunction::LessEqual),
+            ..Default::default()
+        });
+        let shadow_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("shadow map"),
+            layout: &layouts.shadow,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&shadow_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Sampler(&sampler),
+                },
+            ],
+        });
+        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame uniforms"),
+            size: std::mem::size_of::<uniforms::FrameGpu>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let frame_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &layouts.frame,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: frame_buffer.as_entire_binding(),
+            }],
+        });
+        let object_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("object uniforms"),
+            size: OBJECT_STRIDE * instances.len().max(1) as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let object_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("object"),
+            layout: &layouts.object,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &object_buffer,
+                    offset: 0,
+                    size: std::num::NonZeroU64::new(OBJECT_STRIDE),
+                }),
+            }],
+        });
+        let opaque = passes::surface(device, &layouts, false);
+        let background = passes::background(device, &layouts);
+        let translucent = passes
+            .contains(&Pass::Translucent)
+            .then(|| passes::surface(device, &layouts, true));
+        let targets = Targets::new(&gpu, (size.width, size.height));
+        Ok(Self {
+            gpu,
+            scene,
+            passes,
+            size,
+            instances,
+            meshes,
+            opaque,
+            background,
+            shadow,
+            translucent,
+            shadow_bind,
+            frame_buffer,
+            frame_bind,
+            object_buffer,
+            object_bind,
+            targets,
+            last_ids: Vec::new(),
+        })
+    }
+
+    /// Instance id + 1 of every pixel of the last rendered frame (0 for the
+    /// background); index [`Renderer::instances`] with `id − 1`.
+    pub fn last_ids(&self) -> &[u32] {
+        &self.last_ids
+    }
+
+    /// The drawn instances.
+    pub fn instances(&self) -> &[Instance] {
+        &self.instances
+    }
+
+    /// The passes this renderer executes, in order.
+    pub fn passes(&self) -> &[Pass] {
+        &self.passes
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// Adapter name and backend.
+    pub fn adapter(&self) -> &wgpu::AdapterInfo {
+        &self.gpu.adapter_info
+    }
+
+    /// The camera of a scene state.
+    pub fn camera(&self, state: &SceneState) -> Camera {
+        let spec = &self.scene.camera;
+        Camera::new(
+            Pose::look_at(state.eye, state.target, DVec3::Y),
+            Projection::perspective(
+                spec.fov_y_deg.to_radians(),
+                f64::from(self.size.width) / f64::from(self.size.height),
+                spec.near,
+                spec.far.unwrap_or(f64::INFINITY),
+            ),
+        )
+    }
+
+    /// Renders frame `index` of a stream at `fps`: time `index / fps`, with
+    /// motion to time `(index − 1) / fps`. Frame 0 and the first frame of a
+    /// new camera shot have zero motion and (for a shot) `cut = true`.
+    pub fn render(&mut self, index: u64, fps: f64) -> Result<Frame, RenderError> {
+        let t = index as f64 / fps;
+        let prev_t = index.saturating_sub(1) as f64 / fps;
+        self.render_at(index, t, prev_t)
+    }
+
+    /// Renders the state at time `t` with motion vectors to time `prev_t`.
+    pub fn render_at(&mut self, index: u64, t: f64, prev_t: f64) -> Result<Frame, RenderError> {
+        let started = Instant::now();
+        let state = self.scene.evaluate(t);
+        let mut prev = self.scene.evaluate(prev_t);
+        let cut = prev.shot != state.shot;
+        if cut {
+            prev = state.clone();
+        }
+        let camera = self.camera(&state);
+        let prev_camera = self.camera(&prev);
+        let shadow_from_world = self
+            .shadow
+            .as_ref()
+            .and_then(|_| self.shadow_projection(&state));
+        let frame_u = uniforms::frame_uniforms(
+            &self.scene,
+            &FrameInputs {
+                camera: &camera,
+                prev_camera: &prev_camera,
+                size: (self.size.width, self.size.height),
+                prev_size: (self.size.width, self.size.height),
+                lights: &state.lights,
+                shadow_from_world,
+            },
+        );
+        let queue = &self.gpu.queue;
+        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame_u));
+        let mut objects = Vec::with_capacity(self.instances.len());
+        for (i, inst) in self.instances.iter().enumerate() {
+            let material = &self.scene.materials[&self.scene.objects[inst.object].material];
+            objects.push(uniforms::object_uniforms(
+                &camera,
+                i,
+                state.models[i],
+                prev.models[i],
+                material,
+            ));
+        }
+        if !objects.is_empty() {
+            queue.write_buffer(&self.object_buffer, 0, bytemuck::cast_slice(&objects));
+        }
+
+        let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+        if let (Some((pipeline, map)), true) = (&self.shadow, shadow_from_world.is_some()) {
+            let view = map.create_view(&Default::default());
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("shadow"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &self.frame_bind, &[]);
+            self.draw(&mut pass, |m| m.alpha >= 1.0);
+        }
+        {
+            let views = [
+                &self.targets.color,
+                &self.targets.linear_depth,
+                &self.targets.motion,
+                &self.targets.ids,
+            ]
+            .map(|t| t.create_view(&Default::default()));
+            let depth_view = self.targets.depth.create_view(&Default::default());
+            let attachments = views.each_ref().map(|v| {
+                Some(wgpu::RenderPassColorAttachment {
+                    view: v,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })
+            });
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("main"),
+                color_attachments: &attachments,
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            // Opaque.
+            pass.set_pipeline(&self.opaque);
+            pass.set_bind_group(0, &self.frame_bind, &[]);
+            pass.set_bind_group(2, &self.shadow_bind, &[]);
+            self.draw(&mut pass, |m| m.alpha >= 1.0);
+            // Background: only where no geometry wrote depth.
+            pass.set_pipeline(&self.background);
+            pass.set_bind_group(0, &self.frame_bind, &[]);
+            pass.draw(0..3, 0..1);
+            // Translucent, back to front.
+            if let Some(pipeline) = &self.translucent {
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &self.frame_bind, &[]);
+                pass.set_bind_group(2, &self.shadow_bind, &[]);
+                let mut order: Vec<usize> = (0..self.instances.len())
+                    .filter(|&i| self.material_of(i).alpha < 1.0)
+                    .collect();
+                let dist = |i: usize| {
+                    (state.models[i].w_axis.truncate() - camera.pose.position).length_squared()
+                };
+                order.sort_by(|&a, &b| dist(b).total_cmp(&dist(a)));
+                for i in order {
+                    self.draw_instance(&mut pass, i);
+                }
+            }
+        }
+        self.targets.encode_readback(&mut encoder);
+        self.gpu.queue.submit([encoder.finish()]);
+        let out = self.targets.read(&self.gpu)?;
+        // The dynamic mask: 255 where an animated object is visible.
+        let mask = out
+            .ids
+            .iter()
+            .map(|&id| {
+                let animated = id
+                    .checked_sub(1)
+                    .and_then(|i| self.instances.get(i as usize))
+                    .is_some_and(|inst| !self.scene.objects[inst.object].animation.is_empty());
+                if animated { 255 } else { 0 }
+            })
+            .collect();
+        self.last_ids = out.ids;
+        Ok(Frame {
+            meta: FrameMeta {
+                index,
+                time: t,
+                camera,
+                size: self.size,
+                host_processing: started.elapsed(),
+                cut,
+            },
+            color: out.color,
+            depth: out.depth,
+            motion: out.motion,
+            extras: vec![ExtraBuffer {
+                kind: BufferKind::Mask,
+                data: mask,
+            }],
+        })
+    }
+
+    fn material_of(&self, instance: usize) -> &crate::scene::Material {
+        &self.scene.materials[&self.scene.objects[self.instances[instance].object].material]
+    }
+
+    fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        keep: impl Fn(&crate::scene::Material) -> bool,
+    ) {
+        for i in 0..self.instances.len() {
+            if keep(self.material_of(i)) {
+                self.draw_instance(pass, i);
+            }
+        }
+    }
+
+    fn draw_instance(&self, pass: &mut wgpu::RenderPass<'_>, i: usize) {
+        let mesh = &self.meshes[self.instances[i].object];
+        pass.set_bind_group(1, &self.object_bind, &[(i as u64 * OBJECT_STRIDE) as u32]);
+        pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+        pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..mesh.count, 0, 0..1);
+    }
+
+    /// The shadow map projection for the first shadow-casting light, fitted
+    /// to the bounding sphere of all opaque instances.
+    fn shadow_projection(&self, state: &SceneState) -> Option<DMat4> {
+        let light = state
+            .lights
+            .iter()
+            .find(|l| crate::scene::casts_shadow(&l.light))?;
+        let spheres: Vec<(DVec3, f64)> = self
+            .instances
+            .iter()
+            .enumerate()
+            .map(|(i, inst)| {
+                let (c, r) = self.meshes[inst.object].bounds;
+                let m = state.models[i];
+                let scale = m
+                    .x_axis
+                    .truncate()
+                    .length()
+                    .max(m.y_axis.truncate().length())
+                    .max(m.z_axis.truncate().length());
+                (m.transform_point3(c), r * scale)
+            })
+            .collect();
+        let (lo, hi) = spheres.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), (c, r)| (lo.min(*c - *r), hi.max(*c + *r)),
+        );
+        let center = (lo + hi) * 0.5;
+        let radius = (hi - lo).length() * 0.5;
+        Some(uniforms::shadow_from_world(light, center, radius))
+    }
+
+    /// The passes whose pipelines were actually built (compiled), which
+    /// tests compare with [`plan`].
+    pub fn built_pipelines(&self) -> Vec<Pass> {
+        let mut built = Vec::with_capacity(4);
+        if self.shadow.is_some() {
+            built.push(Pass::Shadow);
+        }
+        built.extend([Pass::Opaque, Pass::Background]);
+        if self.translucent.is_some() {
+            built.push(Pass::Translucent);
+        }
+        built
+    }
+}
+
+fn upload(device: &wgpu::Device, mesh: &Mesh) -> GpuMesh {
+    let (lo, hi) = mesh.bounds();
+    let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
+    GpuMesh {
+        vertices: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("vertices"),
+            contents: bytemuck::cast_slice(&mesh.vertices),
+            usage: wgpu::BufferUsages::VERTEX,
+        }),
+        indices: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("indices"),
+            contents: bytemuck::cast_slice(&mesh.indices),
+            usage: wgpu::BufferUsages::INDEX,
+        }),
+        count: mesh.indices.len() as u32,
+        bounds: ((lo + hi) * 0.5, (hi - lo).length() * 0.5),
+    }
+}

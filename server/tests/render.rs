@@ -1,0 +1,293 @@
+//! The renderer on lavapipe: effects gating, determinism, motion vectors
+//! against depth + camera reprojection (static pixels) and against the
+//! objects' own motion (moving pixels), and a recorded dump read back.
+
+use std::path::Path;
+
+use glam::{DVec2, DVec3};
+use protocol::dump::{DumpReader, DumpWriter, Manifest};
+use protocol::{BufferKind, Frame, FrameSize, WorldPoint};
+use server::render::{Pass, Renderer, plan};
+use server::scene::{Scene, builtin};
+
+const SIZE: FrameSize = FrameSize::new(320, 180);
+
+fn renderer(name: &str) -> Renderer {
+    let scene = Scene::load(&format!("builtin:{name}")).unwrap();
+    Renderer::new(scene, SIZE, Path::new(".")).unwrap()
+}
+
+fn pixel(i: usize) -> DVec2 {
+    let w = SIZE.width as usize;
+    DVec2::new((i % w) as f64 + 0.5, (i / w) as f64 + 0.5)
+}
+
+fn is_animated(r: &Renderer, id: u32) -> bool {
+    id.checked_sub(1)
+        .map(|i| r.instances()[i as usize])
+        .is_some_and(|inst| !r.scene().objects[inst.object].animation.is_empty())
+}
+
+#[test]
+fn passes_follow_the_declared_effects() {
+    for name in builtin::names() {
+        let r = renderer(name);
+        let scene = r.scene();
+        assert_eq!(r.passes(), plan(scene).as_slice(), "{name}");
+        assert_eq!(
+            r.built_pipelines(),
+            plan(scene),
+            "{name}: only planned pipelines are built"
+        );
+        let has = |p| r.passes().contains(&p);
+        assert_eq!(
+            has(Pass::Shadow),
+            scene.has(server::scene::Effect::Shadows),
+            "{name}"
+        );
+        assert_eq!(
+            has(Pass::Translucent),
+            scene.has(server::scene::Effect::Translucency),
+            "{name}"
+        );
+        assert!(has(Pass::Opaque) && has(Pass::Background));
+    }
+    assert!(!plan(&Scene::load("builtin:sky").unwrap()).contains(&Pass::Shadow));
+    assert!(!plan(&Scene::load("builtin:crossing").unwrap()).contains(&Pass::Translucent));
+}
+
+const BASE: &str = r#"(
+    name: "probe",
+    description: "effect probe",
+    effects: [EFFECTS],
+    camera: (fov_y_deg: 50, path: Static(eye: (0, 3, 6), target: (0, 0.5, 0))),
+    materials: {
+        "ground": (albedo: (0.6, 0.6, 0.6)),
+        "shiny": (albedo: (0.5, 0.2, 0.2), roughness: 0.1, specular: 1.0),
+    },
+    objects: [
+        (name: "ground", mesh: Plane(size: (20, 20)), material: "ground"),
+        (name: "ball", mesh: Sphere(radius: 1), material: "shiny", transform: (position: (0, 1, 0))),
+    ],
+    lights: [(kind: Directional(direction: (-0.5, -1, -0.3)), intensity: 3.0)],
+)"#;
+
+fn probe(effects: &str) -> Frame {
+    let scene = Scene::from_ron(&BASE.replace("EFFECTS", effects), "probe").unwrap();
+    Renderer::new(scene, SIZE, Path::new("."))
+        .unwrap()
+        .render(0, 30.0)
+        .unwrap()
+}
+
+#[test]
+fn adding_an_effect_changes_the_image() {
+    let plain = probe("");
+    let differs =
+        |a: &Frame, b: &Frame| a.color.iter().zip(&b.color).filter(|(p, q)| p != q).count();
+    for effect in ["shadows", "specular", "sky"] {
+        let with = probe(effect);
+        let n = differs(&plain, &with);
+        assert!(n > 100, "{effect} changed only {n} pixels");
+        // Geometry outputs do not depend on shading effects.
+        assert_eq!(plain.depth, with.depth, "{effect}");
+    }
+}
+
+#[test]
+fn rendering_is_deterministic() {
+    let mut a = renderer("default");
+    let f1 = a.render(7, 30.0).unwrap();
+    a.render(3, 30.0).unwrap();
+    let f2 = a.render(7, 30.0).unwrap();
+    let f3 = renderer("default").render(7, 30.0).unwrap();
+    for f in [&f2, &f3] {
+        assert_eq!(f1.color, f.color);
+        assert_eq!(f1.depth, f.depth);
+        assert_eq!(f1.motion, f.motion);
+        assert_eq!(f1.extras, f.extras);
+        assert_eq!(f1.meta.camera, f.meta.camera);
+    }
+}
+
+/// Max and mean |GPU motion − expected| over pixels where `expected` is
+/// defined.
+fn compare(frame: &Frame, mut expected: impl FnMut(usize) -> Option<DVec2>) -> (f64, f64, usize) {
+    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0);
+    for i in 0..frame.motion.len() {
+        let Some(want) = expected(i) else { continue };
+        let got = DVec2::new(f64::from(frame.motion[i][0]), f64::from(frame.motion[i][1]));
+        let err = (got - want).length();
+        max = max.max(err);
+        sum += err;
+        n += 1;
+    }
+    (max, sum / n.max(1) as f64, n)
+}
+
+#[test]
+fn static_motion_matches_depth_and_camera_reprojection() {
+    for name in ["pan", "dolly", "sky", "huge"] {
+        let mut r = renderer(name);
+        for fps in [30.0, 60.0] {
+            let index = 17;
+            let frame = r.render(index, fps).unwrap();
+            let ids = r.last_ids().to_vec();
+            let prev_cam = r.camera(&r.scene().evaluate((index - 1) as f64 / fps));
+            let cur = frame.meta.camera;
+            let dims = SIZE.as_f64();
+            let (max, mean, n) = compare(&frame, |i| {
+                if is_animated(&r, ids[i]) {
+                    return None;
+                }
+                cur.static_motion(&prev_cam, pixel(i), f64::from(frame.depth[i]), dims, dims)
+            });
+            eprintln!(
+                "{name} @ {fps} fps: static motion error max {max:.5} px, mean {mean:.6} px over {n} pixels"
+            );
+            assert!(
+                n > (SIZE.pixels() as usize) / 2,
+                "{name}: only {n} static pixels"
+            );
+            assert!(
+                max < 0.05,
+                "{name} @ {fps} fps: max error {max:.4} px (mean {mean:.5})"
+            );
+            let sky = frame.depth.iter().filter(|d| d.is_infinite()).count();
+            if name == "sky" {
+                assert!(sky > 1000, "the sky scene shows sky");
+            }
+        }
+    }
+}
+
+#[test]
+fn moving_objects_match_their_analytic_motion() {
+    for name in ["crossing", "default"] {
+        let mut r = renderer(name);
+        let fps = 30.0;
+        let index = 20;
+        let frame = r.render(index, fps).unwrap();
+        let ids = r.last_ids().to_vec();
+        let t = index as f64 / fps;
+        let (now, before) = (r.scene().evaluate(t), r.scene().evaluate(t - 1.0 / fps));
+        let prev_cam = r.camera(&before);
+        let cur = frame.meta.camera;
+        let dims = SIZE.as_f64();
+        let (max, mean, n) = compare(&frame, |i| {
+            if !is_animated(&r, ids[i]) {
+                return None;
+            }
+            let inst = (ids[i] - 1) as usize;
+            let Some(WorldPoint::Finite(p)) =
+                cur.unproject(pixel(i), f64::from(frame.depth[i]), dims)
+            else {
+                return None;
+            };
+            // Carry the surface point with its object back to t − Δt.
+            let local = now.models[inst].inverse().transform_point3(p);
+            let then = before.models[inst].transform_point3(local);
+            Some(prev_cam.project(WorldPoint::Finite(then), dims)?.pixel - pixel(i))
+        });
+        eprintln!("{name}: object motion error max {max:.5} px, mean {mean:.6} px over {n} pixels");
+        assert!(n > 200, "{name}: only {n} moving pixels");
+        assert!(
+            max < 0.05,
+            "{name}: max error {max:.4} px (mean {mean:.5}) over {n} pixels"
+        );
+        // The dynamic mask marks exactly those pixels.
+        let mask = &frame
+            .extras
+            .iter()
+            .find(|e| e.kind == BufferKind::Mask)
+            .unwrap()
+            .data;
+        let marked = mask.iter().filter(|&&m| m == 255).count();
+        assert_eq!(
+            marked,
+            ids.iter().filter(|&&id| is_animated(&r, id)).count()
+        );
+        // And they do move.
+        let moving = (0..ids.len())
+            .filter(|&i| is_animated(&r, ids[i]))
+            .filter(|&i| frame.motion[i][0].hypot(frame.motion[i][1]) > 0.1)
+            .count();
+        assert!(moving > n / 2, "{name}: moving objects should move");
+    }
+}
+
+#[test]
+fn a_cut_frame_is_flagged_and_has_no_motion() {
+    let mut r = renderer("cut");
+    let fps = 30.0;
+    // The first shot ends at 1.5 s = frame 45.
+    let before = r.render(44, fps).unwrap();
+    let at = r.render(45, fps).unwrap();
+    assert!(!before.meta.cut && at.meta.cut);
+    assert!(
+        at.motion
+            .iter()
+            .all(|m| m[0].abs() < 1e-3 && m[1].abs() < 1e-3)
+    );
+    assert!(before.motion.iter().any(|m| m[0].abs() > 0.01));
+}
+
+#[test]
+fn fast_rotation_moves_over_100_pixels_per_frame_at_720p() {
+    // Motion scales with width: 320 px here, so 100 px at 1280 is 25 px.
+    let mut r = renderer("fast_rotation");
+    let frame = r.render(10, 30.0).unwrap();
+    let median = {
+        let mut m: Vec<f32> = frame.motion.iter().map(|m| m[0].hypot(m[1])).collect();
+        m.sort_by(f32::total_cmp);
+        m[m.len() / 2]
+    };
+    assert!(
+        median * 1280.0 / SIZE.width as f32 > 100.0,
+        "median {median} px at 320 wide"
+    );
+}
+
+#[test]
+fn huge_coordinates_render_like_the_origin() {
+    // The same layout at the origin and at 1e5 gives the same depth.
+    let huge = Scene::load("builtin:huge").unwrap();
+    let mut near = huge.clone();
+    near.origin = [0.0; 3];
+    let a = Renderer::new(huge, SIZE, Path::new("."))
+        .unwrap()
+        .render(5, 30.0)
+        .unwrap();
+    let b = Renderer::new(near, SIZE, Path::new("."))
+        .unwrap()
+        .render(5, 30.0)
+        .unwrap();
+    let max = a
+        .depth
+        .iter()
+        .zip(&b.depth)
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .map(|(x, y)| (x - y).abs() / y)
+        .fold(0.0f32, f32::max);
+    assert!(max < 1e-3, "relative depth difference {max}");
+    let pos = a.meta.camera.pose.position - b.meta.camera.pose.position;
+    assert!((pos - DVec3::new(1e5, 0.0, -1e5)).length() < 1e-6);
+}
+
+#[test]
+fn a_recorded_dump_reads_back_identically() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut r = renderer("crossing");
+    let mut w = DumpWriter::create(dir.path(), Manifest::new(30.0, SIZE, "test")).unwrap();
+    let frames: Vec<Frame> = (0..3).map(|k| r.render(k, 30.0).unwrap()).collect();
+    for f in &frames {
+        w.write_frame(f).unwrap();
+    }
+    w.finish().unwrap();
+    let back: Vec<Frame> = DumpReader::open(dir.path())
+        .unwrap()
+        .frames()
+        .map(Result::unwrap)
+        .collect();
+    assert_eq!(back, frames);
+}
