@@ -88,6 +88,33 @@ impl Pose {
         self.rotation * DVec3::X
     }
 
+    /// Linear camera extrapolation, GFFE eq. 2:
+    /// `C̃(t+α) = C(t) + α (C(t) − C(t−1))` applied to the position, view
+    /// direction and up vector separately, then re-orthonormalised. `α = 0`
+    /// gives `cur`, `α = 1` one more step of the same motion. Degenerate
+    /// results (a direction that cancels out) fall back to `cur`'s axes.
+    pub fn extrapolate(prev: &Pose, cur: &Pose, alpha: f64) -> Pose {
+        let position = cur.position + alpha * (cur.position - prev.position);
+        let forward = cur.forward() + alpha * (cur.forward() - prev.forward());
+        let up = cur.up() + alpha * (cur.up() - prev.up());
+        if !position.is_finite() || forward.length_squared() < 1e-12 || !forward.is_finite() {
+            return Pose::new(
+                if position.is_finite() {
+                    position
+                } else {
+                    cur.position
+                },
+                cur.rotation,
+            );
+        }
+        let up = if up.is_finite() && up.cross(forward).length_squared() > 1e-12 {
+            up
+        } else {
+            cur.up()
+        };
+        Pose::look_at(position, position + forward, up)
+    }
+
     /// The same pose with its rotation renormalised.
     pub fn normalized(&self) -> Self {
         Self::new(self.position, self.rotation.normalize())
@@ -540,6 +567,26 @@ mod tests {
             }
             assert!(ndc_z(10.0) > ndc_z(1.0), "farther is larger");
         }
+    }
+
+    #[test]
+    fn camera_extrapolation_continues_linear_motion() {
+        let a = Pose::look_at(DVec3::ZERO, DVec3::NEG_Z, DVec3::Y);
+        let b = Pose::look_at(DVec3::X, DVec3::X + DVec3::NEG_Z, DVec3::Y);
+        let c = Pose::extrapolate(&a, &b, 1.0);
+        assert!((c.position - DVec3::new(2.0, 0.0, 0.0)).length() < 1e-12);
+        assert!((c.forward() - DVec3::NEG_Z).length() < 1e-12);
+        assert_eq!(Pose::extrapolate(&a, &b, 0.0).position, b.position);
+        // A small yaw step continues (approximately: eq. 2 is linear in the
+        // direction vectors, so it slightly undershoots the angle).
+        let r = |deg: f64| Pose::new(DVec3::ZERO, DQuat::from_rotation_y(deg.to_radians()));
+        let next = Pose::extrapolate(&r(0.0), &r(5.0), 1.0);
+        let yaw = next.forward().x.atan2(-next.forward().z).to_degrees();
+        assert!((yaw + 10.0).abs() < 0.1, "{yaw}");
+        assert!(next.rotation.is_normalized());
+        // A 180° flip cancels the direction: fall back to the current axes.
+        let flip = Pose::extrapolate(&r(180.0), &r(0.0), 0.5);
+        assert!(flip.rotation.is_finite() && (flip.forward() - DVec3::NEG_Z).length() < 1e-9);
     }
 
     #[test]

@@ -7,7 +7,8 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use protocol::FrameSize;
 use protocol::dump::{DumpWriter, Manifest};
-use server::render::{Renderer, plan};
+use protocol::wire::WindowMode;
+use server::render::{Renderer, WindowSettings, plan};
 use server::scene::{Scene, builtin};
 
 #[derive(Parser)]
@@ -42,6 +43,10 @@ enum Command {
         /// Also write display-encoded PNGs of the color to OUT/png/.
         #[arg(long)]
         png: bool,
+        /// Adaptive rendering window (GFFE §4.3): off, keep-density (the
+        /// rendered size grows) or keep-size (lower density).
+        #[arg(long, default_value = "off", value_parser = parse_window)]
+        window: WindowMode,
     },
     /// Show what a scene declares and which passes it builds.
     Info {
@@ -56,6 +61,15 @@ enum Command {
         /// The dump directory (holding manifest.json).
         dir: PathBuf,
     },
+}
+
+fn parse_window(s: &str) -> Result<WindowMode, String> {
+    match s {
+        "off" => Ok(WindowMode::Off),
+        "keep-density" => Ok(WindowMode::KeepDensity),
+        "keep-size" => Ok(WindowMode::KeepSize),
+        _ => Err("expected off, keep-density or keep-size".into()),
+    }
 }
 
 fn parse_size(s: &str) -> Result<FrameSize, String> {
@@ -83,7 +97,17 @@ fn main() -> anyhow::Result<()> {
             seconds,
             start,
             png,
-        } => record(&scene, &out, fps, size, seconds, start, png),
+            window,
+        } => record(&RecordArgs {
+            spec: &scene,
+            out: &out,
+            fps,
+            size,
+            seconds,
+            start,
+            png,
+            window,
+        }),
         Command::Info { scene, list } => info(scene.as_deref(), list),
         Command::Inspect { dir } => inspect(&dir),
     }
@@ -108,15 +132,28 @@ fn progress(len: u64, what: &str) -> ProgressBar {
     ProgressBar::new(len).with_style(style)
 }
 
-fn record(
-    spec: &str,
-    out: &Path,
+struct RecordArgs<'a> {
+    spec: &'a str,
+    out: &'a Path,
     fps: f64,
     size: FrameSize,
     seconds: f64,
     start: u64,
     png: bool,
-) -> anyhow::Result<()> {
+    window: WindowMode,
+}
+
+fn record(args: &RecordArgs) -> anyhow::Result<()> {
+    let RecordArgs {
+        spec,
+        out,
+        fps,
+        size,
+        seconds,
+        start,
+        png,
+        window,
+    } = *args;
     anyhow::ensure!(
         fps.is_finite() && fps > 0.0 && fps <= 1000.0,
         "fps must be in (0, 1000]"
@@ -125,8 +162,12 @@ fn record(
     let scene = Scene::load(spec)?;
     let frames = (seconds * fps).round().max(1.0) as u64;
     let mut renderer = Renderer::new(scene, size, &scene_base(spec))?;
+    renderer.set_window(WindowSettings {
+        mode: window,
+        ..WindowSettings::default()
+    });
     let source = format!(
-        "server record {spec} --fps {fps} --size {}x{} --seconds {seconds} --start {start}; adapter {} ({:?}); passes {:?}",
+        "server record {spec} --fps {fps} --size {}x{} --seconds {seconds} --start {start} --window {window:?}; adapter {} ({:?}); passes {:?}",
         size.width,
         size.height,
         renderer.adapter().name,

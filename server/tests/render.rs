@@ -291,3 +291,69 @@ fn a_recorded_dump_reads_back_identically() {
         .collect();
     assert_eq!(back, frames);
 }
+
+fn windowed(name: &str, mode: protocol::wire::WindowMode) -> Renderer {
+    let mut r = renderer(name);
+    r.set_window(server::render::WindowSettings {
+        mode,
+        ..Default::default()
+    });
+    r
+}
+
+#[test]
+fn the_adaptive_window_widens_towards_the_turn_and_crops_to_the_plain_frame() {
+    use protocol::wire::WindowMode;
+    let plain = renderer("pan").render(10, 30.0).unwrap();
+    let mut r = windowed("pan", WindowMode::KeepDensity);
+    let prev = r.render(9, 30.0).unwrap();
+    let wide = r.render(10, 30.0).unwrap();
+    let w = wide.meta.camera.window;
+    // The pan turns left (1° per frame): the left side grows; the pitched
+    // view's footprint also shifts a little vertically. Display density.
+    assert!(
+        w.u0 < -1.02 && w.u1 == 1.0 && w.v0 > -1.05 && w.v1 < 1.05,
+        "{w:?}"
+    );
+    assert!(wide.meta.size.width > SIZE.width + 4);
+    let (x0, y0, _, _) = w.display_rect(wide.meta.size.as_f64());
+    let (x0, y0) = (x0.round() as u32, y0.round() as u32);
+    let mut same_color = 0;
+    for y in 0..SIZE.height {
+        for x in 0..SIZE.width {
+            let a = plain.index(x, y);
+            let b = wide.index(x + x0, y + y0);
+            let (da, db) = (plain.depth[a], wide.depth[b]);
+            assert!(
+                da == db || (da - db).abs() <= 1e-4 * da,
+                "depth at {x},{y}: {da} vs {db}"
+            );
+            same_color += usize::from(plain.color[a] == wide.color[b]);
+        }
+    }
+    assert!(
+        same_color as f64 > 0.99 * SIZE.pixels() as f64,
+        "{same_color} equal colors"
+    );
+    // Motion lands in the previous frame's own (widened) pixel grid.
+    let (cur, prev_cam) = (wide.meta.camera, prev.meta.camera);
+    let (dims, prev_dims) = (wide.meta.size.as_f64(), prev.meta.size.as_f64());
+    let (max, _, n) = compare(&wide, |i| {
+        let w = wide.meta.size.width as usize;
+        let px = DVec2::new((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+        cur.static_motion(&prev_cam, px, f64::from(wide.depth[i]), dims, prev_dims)
+    });
+    assert!(n > 50_000 && max < 0.05, "max {max} over {n}");
+}
+
+#[test]
+fn keep_size_widens_the_window_at_a_fixed_size() {
+    use protocol::wire::WindowMode;
+    let mut r = windowed("pan", WindowMode::KeepSize);
+    let f = r.render(10, 30.0).unwrap();
+    assert_eq!(f.meta.size, SIZE);
+    assert!(f.meta.camera.window.u0 < -1.02);
+    // A still camera keeps the plain window.
+    let mut still = windowed("crossing", WindowMode::KeepDensity);
+    assert!(still.render(10, 30.0).unwrap().meta.camera.window.is_full());
+}

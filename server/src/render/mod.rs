@@ -21,6 +21,7 @@ mod gpu;
 mod passes;
 mod targets;
 mod uniforms;
+pub mod window;
 
 use std::path::Path;
 use std::time::Instant;
@@ -29,6 +30,7 @@ use glam::{DMat4, DVec3};
 use wgpu::util::DeviceExt;
 
 pub use gpu::Gpu;
+pub use window::WindowSettings;
 
 use crate::scene::{Effect, Instance, Scene, SceneError, SceneState, mesh::Mesh};
 use protocol::frame::ExtraBuffer;
@@ -110,6 +112,7 @@ pub struct Renderer {
     object_bind: wgpu::BindGroup,
     targets: Targets,
     last_ids: Vec<u32>,
+    window: WindowSettings,
 }
 
 impl Renderer {
@@ -249,7 +252,20 @@ impl Renderer {
             object_bind,
             targets,
             last_ids: Vec::new(),
+            window: WindowSettings::default(),
         })
+    }
+
+    /// Sets the adaptive rendering window (GFFE §4.3); off by default.
+    pub fn set_window(&mut self, settings: WindowSettings) {
+        self.window = settings;
+    }
+
+    /// The window and rendered size for a frame whose camera is `cur` and
+    /// whose previous camera pose was `prev`.
+    fn window_for(&self, prev: &Pose, cur: &Camera) -> (protocol::Window, FrameSize) {
+        let w = window::adaptive_window(&self.window, prev, cur);
+        window::snap(self.window.mode, w, self.size)
     }
 
     /// Instance id + 1 of every pixel of the last rendered frame (0 for the
@@ -296,13 +312,25 @@ impl Renderer {
     /// motion to time `(index − 1) / fps`. Frame 0 and the first frame of a
     /// new camera shot have zero motion and (for a shot) `cut = true`.
     pub fn render(&mut self, index: u64, fps: f64) -> Result<Frame, RenderError> {
-        let t = index as f64 / fps;
-        let prev_t = index.saturating_sub(1) as f64 / fps;
-        self.render_at(index, t, prev_t)
+        let time = |k: u64| k as f64 / fps;
+        self.render_at(
+            index,
+            time(index),
+            time(index.saturating_sub(1)),
+            time(index.saturating_sub(2)),
+        )
     }
 
-    /// Renders the state at time `t` with motion vectors to time `prev_t`.
-    pub fn render_at(&mut self, index: u64, t: f64, prev_t: f64) -> Result<Frame, RenderError> {
+    /// Renders the state at time `t` with motion vectors to the frame at
+    /// `prev_t`, whose own predecessor (for its adaptive window) was at
+    /// `prev_prev_t`.
+    pub fn render_at(
+        &mut self,
+        index: u64,
+        t: f64,
+        prev_t: f64,
+        prev_prev_t: f64,
+    ) -> Result<Frame, RenderError> {
         let started = Instant::now();
         let state = self.scene.evaluate(t);
         let mut prev = self.scene.evaluate(prev_t);
@@ -310,8 +338,31 @@ impl Renderer {
         if cut {
             prev = state.clone();
         }
-        let camera = self.camera(&state);
-        let prev_camera = self.camera(&prev);
+        let mut camera = self.camera(&state);
+        let mut prev_camera = self.camera(&prev);
+        // Windows of this and of the previous frame (motion vectors land in
+        // the previous frame's pixel grid, which its own window defines).
+        let (window, size) = if cut {
+            self.window_for(&camera.pose, &camera)
+        } else {
+            self.window_for(&prev_camera.pose, &camera)
+        };
+        let (prev_window, prev_size) = if cut {
+            (window, size)
+        } else {
+            let before_state = self.scene.evaluate(prev_prev_t);
+            let before = if before_state.shot == prev.shot {
+                self.camera(&before_state)
+            } else {
+                prev_camera
+            };
+            self.window_for(&before.pose, &prev_camera)
+        };
+        camera.window = window;
+        prev_camera.window = prev_window;
+        if self.targets.size != (size.width, size.height) {
+            self.targets = Targets::new(&self.gpu, (size.width, size.height));
+        }
         let shadow_from_world = self
             .shadow
             .as_ref()
@@ -321,8 +372,8 @@ impl Renderer {
             &FrameInputs {
                 camera: &camera,
                 prev_camera: &prev_camera,
-                size: (self.size.width, self.size.height),
-                prev_size: (self.size.width, self.size.height),
+                size: (size.width, size.height),
+                prev_size: (prev_size.width, prev_size.height),
                 lights: &state.lights,
                 shadow_from_world,
             },
@@ -448,7 +499,7 @@ impl Renderer {
                 index,
                 time: t,
                 camera,
-                size: self.size,
+                size,
                 host_processing: started.elapsed(),
                 cut,
             },
