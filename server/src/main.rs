@@ -25,9 +25,10 @@ enum Command {
         /// `builtin:NAME` or a path to a RON scene file.
         #[arg(default_value = "builtin:default")]
         scene: String,
-        /// Output directory (must not hold a dump yet).
+        /// Output directory (must not hold a dump yet); default
+        /// `dumps/SCENE-UNIXTIME`.
         #[arg(long, short)]
-        out: PathBuf,
+        out: Option<PathBuf>,
         /// Frames per second of the recording.
         #[arg(long, default_value_t = 30.0)]
         fps: f64,
@@ -99,8 +100,8 @@ fn main() -> anyhow::Result<()> {
             png,
             window,
         } => record(&RecordArgs {
+            out: &out.unwrap_or_else(|| default_out(&scene)),
             spec: &scene,
-            out: &out,
             fps,
             size,
             seconds,
@@ -111,6 +112,18 @@ fn main() -> anyhow::Result<()> {
         Command::Info { scene, list } => info(scene.as_deref(), list),
         Command::Inspect { dir } => inspect(&dir),
     }
+}
+
+/// `dumps/NAME-UNIXTIME` for a scene spec.
+fn default_out(spec: &str) -> PathBuf {
+    let name = Path::new(spec.trim_start_matches("builtin:"))
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into());
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    PathBuf::from("dumps").join(format!("{name}-{secs}"))
 }
 
 /// Directory that relative glTF paths of a scene resolve against.

@@ -357,3 +357,28 @@ fn keep_size_widens_the_window_at_a_fixed_size() {
     let mut still = windowed("crossing", WindowMode::KeepDensity);
     assert!(still.render(10, 30.0).unwrap().meta.camera.window.is_full());
 }
+
+#[test]
+fn a_moving_light_moves_shadows_on_static_geometry() {
+    let mut r = renderer("moving_light");
+    let a = r.render(0, 30.0).unwrap();
+    let b = r.render(15, 30.0).unwrap();
+    // Nothing geometric moves: same depth, zero motion.
+    assert_eq!(a.depth, b.depth);
+    assert!(
+        b.motion
+            .iter()
+            .all(|m| m[0].abs() < 1e-4 && m[1].abs() < 1e-4)
+    );
+    // But the shading does, over a large part of the image.
+    let changed = a
+        .color
+        .iter()
+        .zip(&b.color)
+        .filter(|(p, q)| (p[0].to_f32() - q[0].to_f32()).abs() > 0.05)
+        .count();
+    assert!(
+        changed > (SIZE.pixels() / 10) as usize,
+        "only {changed} pixels changed"
+    );
+}

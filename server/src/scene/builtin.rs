@@ -23,6 +23,21 @@ pub const SCENES: &[(&str, &str)] = &[
     ("huge", include_str!("../../scenes/huge.ron")),
 ];
 
+/// `(name, glTF JSON)` of the assets built-in scenes use, as
+/// `Gltf(path: "builtin:NAME")`. Buffers are embedded as data URIs.
+pub const ASSETS: &[(&str, &str)] = &[(
+    "pyramid.gltf",
+    include_str!("../../scenes/assets/pyramid.gltf"),
+)];
+
+/// The bytes of a built-in asset.
+pub fn asset(name: &str) -> Option<&'static [u8]> {
+    ASSETS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, s)| s.as_bytes())
+}
+
 /// The RON source of a built-in scene.
 pub fn source(name: &str) -> Option<&'static str> {
     SCENES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)

@@ -73,7 +73,8 @@ pub enum MeshSpec {
     },
     /// Every mesh of a glTF file's default scene, with node transforms.
     Gltf {
-        /// Path, relative to the scene file's directory.
+        /// Path, relative to the scene file's directory, or `builtin:NAME`
+        /// for an asset embedded in the binary.
         path: String,
     },
 }
@@ -119,7 +120,27 @@ impl MeshSpec {
                 segments,
             } => cylinder(*radius, *height, *segments),
             MeshSpec::Rod { length, radius } => cylinder(*radius, *length, 6),
-            MeshSpec::Gltf { path } => load_gltf(&base.join(path))?,
+            MeshSpec::Gltf { path } => match path.strip_prefix("builtin:") {
+                Some(name) => {
+                    let bytes = super::builtin::asset(name).ok_or_else(|| SceneError::Gltf {
+                        path: path.clone(),
+                        message: "no such built-in asset".into(),
+                    })?;
+                    let imported = gltf::import_slice(bytes).map_err(|e| SceneError::Gltf {
+                        path: path.clone(),
+                        message: e.to_string(),
+                    })?;
+                    gltf_mesh(path, imported)?
+                }
+                None => {
+                    let full = base.join(path);
+                    let imported = gltf::import(&full).map_err(|e| SceneError::Gltf {
+                        path: full.display().to_string(),
+                        message: e.to_string(),
+                    })?;
+                    gltf_mesh(&full.display().to_string(), imported)?
+                }
+            },
         })
     }
 }
@@ -279,14 +300,20 @@ fn cylinder(radius: f32, height: f32, segments: u32) -> Mesh {
     m
 }
 
-/// Loads every triangle mesh of the glTF's default scene, baking node
-/// transforms into the vertices.
-fn load_gltf(path: &Path) -> Result<Mesh, SceneError> {
+/// Every triangle mesh of an imported glTF's default scene, with node
+/// transforms baked into the vertices. `path` names it in errors.
+fn gltf_mesh(
+    path: &str,
+    (doc, buffers, _): (
+        gltf::Document,
+        Vec<gltf::buffer::Data>,
+        Vec<gltf::image::Data>,
+    ),
+) -> Result<Mesh, SceneError> {
     let err = |message: String| SceneError::Gltf {
-        path: path.display().to_string(),
+        path: path.to_owned(),
         message,
     };
-    let (doc, buffers, _) = gltf::import(path).map_err(|e| err(e.to_string()))?;
     let scene = doc
         .default_scene()
         .or_else(|| doc.scenes().next())
@@ -409,6 +436,38 @@ mod tests {
             (lo, hi),
             (Vec3::new(-0.5, -1.0, -1.5), Vec3::new(0.5, 1.0, 1.5))
         );
+    }
+
+    #[test]
+    fn gltf_meshes_load_with_node_transforms() {
+        let m = MeshSpec::Gltf {
+            path: "builtin:pyramid.gltf".into(),
+        }
+        .build(Path::new("."))
+        .unwrap();
+        check(&m);
+        assert_eq!(m.indices.len(), 18);
+        // The node scales the unit pyramid (apex at 1.2) by 1.5.
+        let (lo, hi) = m.bounds();
+        assert!(
+            (hi.y - 1.8).abs() < 1e-5 && lo.y.abs() < 1e-6 && (hi.x - 0.75).abs() < 1e-5,
+            "{lo} {hi}"
+        );
+        // The same file from disk.
+        let dir = std::env::temp_dir().join(format!("gltf-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("p.gltf"),
+            super::super::builtin::asset("pyramid.gltf").unwrap(),
+        )
+        .unwrap();
+        let from_disk = MeshSpec::Gltf {
+            path: "p.gltf".into(),
+        }
+        .build(&dir)
+        .unwrap();
+        assert_eq!(from_disk, m);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

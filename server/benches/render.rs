@@ -1,0 +1,44 @@
+//! Wall time of one rendered frame (submit + GPU work + readback of color,
+//! depth, motion and ids) per built-in scene at 1280×720. On lavapipe GPU
+//! timestamps are unreliable, so this is wall time, as the DESIGN asks.
+//!
+//! `cargo bench -p server --bench render` (set `RENDER_BENCH_SIZE=WxH` to
+//! change the size).
+
+use std::path::Path;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use protocol::FrameSize;
+use server::render::Renderer;
+use server::scene::{Scene, builtin};
+
+fn size() -> FrameSize {
+    std::env::var("RENDER_BENCH_SIZE")
+        .ok()
+        .and_then(|s| {
+            let (w, h) = s.split_once('x')?;
+            Some(FrameSize::new(w.parse().ok()?, h.parse().ok()?))
+        })
+        .unwrap_or(FrameSize::new(1280, 720))
+}
+
+fn render(c: &mut Criterion) {
+    let size = size();
+    let mut group = c.benchmark_group(format!("render_{}x{}", size.width, size.height));
+    group.sample_size(10);
+    for name in builtin::names() {
+        let scene = Scene::load(&format!("builtin:{name}")).expect("built-in scene");
+        let mut r = Renderer::new(scene, size, Path::new(".")).expect("renderer");
+        let mut k = 30;
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                k += 1;
+                r.render(k, 30.0).expect("frame")
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, render);
+criterion_main!(benches);
