@@ -127,7 +127,7 @@ fn compare(frame: &Frame, mut expected: impl FnMut(usize) -> Option<DVec2>) -> (
 
 #[test]
 fn static_motion_matches_depth_and_camera_reprojection() {
-    for name in ["pan", "dolly", "sky", "huge"] {
+    for name in ["pan", "dolly", "sky", "huge", "thin"] {
         let mut r = renderer(name);
         for fps in [30.0, 60.0] {
             let index = 17;
