@@ -2,10 +2,15 @@
 //! with their issues; the sans-IO core that turns per-frame streams into an
 //! ordered sequence of frames is here already.
 //!
+//! * [`connect`] and [`tls`]: the QUIC session with a pinned certificate;
 //! * [`receiver`]: reassembles frames from per-frame streams, delivers them
 //!   in order, supersedes late ones and keeps the statistics the client
 //!   reports to the server.
 
+pub mod connect;
 pub mod receiver;
+pub mod tls;
 
+pub use connect::{ConnectConfig, ConnectError, Session, SessionStats, connect};
 pub use receiver::{Delivery, FrameReceiver, ReceiveError, StreamId};
+pub use tls::Pin;

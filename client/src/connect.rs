@@ -1,0 +1,406 @@
+//! The client side of the stream (DESIGN §7): connect with a pinned
+//! certificate, handshake on the control stream, then receive one frame per
+//! unidirectional stream through the sans-IO [`FrameReceiver`], decode, and
+//! hand complete frames to the consumer in order. Stats go back to the
+//! server every second; pings measure the round trip.
+
+use std::collections::HashSet;
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use protocol::wire::{
+    self, ClientStats, Decoder, Hello, Message, Ping, Reject, ServerStats, WIRE_VERSION, Welcome,
+    WindowMode,
+};
+use protocol::{Codec, Frame, FrameSize, Limits};
+use tokio::sync::mpsc;
+
+use crate::receiver::{FrameReceiver, ReceiveError, StreamId};
+use crate::tls::{Pin, PinError};
+
+/// How to reach and authenticate to a server.
+#[derive(Clone, Debug)]
+pub struct ConnectConfig {
+    /// Server address.
+    pub addr: SocketAddr,
+    /// Name for TLS (SNI); the pin decides trust.
+    pub server_name: String,
+    /// Which certificate to trust.
+    pub pin: Pin,
+    /// Access token.
+    pub token: String,
+    /// Client name for the server's logs.
+    pub client_name: String,
+    /// Wire version to announce (tests use others).
+    pub version: u16,
+    /// Limits for everything received.
+    pub limits: Limits,
+    /// Frames buffered for a slow consumer before the receiver waits.
+    pub queue: usize,
+}
+
+impl ConnectConfig {
+    /// Defaults for `addr` with `pin` and `token`.
+    pub fn new(addr: SocketAddr, pin: Pin, token: impl Into<String>) -> Self {
+        Self {
+            addr,
+            server_name: "localhost".into(),
+            pin,
+            token: token.into(),
+            client_name: "client".into(),
+            version: WIRE_VERSION,
+            limits: Limits::default(),
+            queue: 8,
+        }
+    }
+}
+
+/// Why a session could not start or ended badly.
+#[derive(Debug, thiserror::Error)]
+pub enum ConnectError {
+    /// The pin is unusable.
+    #[error(transparent)]
+    Pin(#[from] PinError),
+    /// The local endpoint could not be created.
+    #[error("local endpoint: {0}")]
+    Endpoint(#[from] std::io::Error),
+    /// The connection could not be started.
+    #[error("connect: {0}")]
+    Connect(#[from] quinn::ConnectError),
+    /// The connection failed or was closed (including a pin mismatch).
+    #[error("connection: {0}")]
+    Connection(#[from] quinn::ConnectionError),
+    /// The server refused the client.
+    #[error("refused ({:?}): {}", .0.reason, .0.message)]
+    Rejected(Reject),
+    /// The server broke the protocol.
+    #[error("protocol: {0}")]
+    Protocol(String),
+    /// No answer in time.
+    #[error("timed out waiting for {0}")]
+    Timeout(&'static str),
+}
+
+/// Live statistics of a session.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SessionStats {
+    /// What the client reports to the server.
+    pub client: ClientStats,
+    /// The server's last report.
+    pub server: Option<ServerStats>,
+    /// Frame streams that broke the protocol (each also closes the session).
+    pub stream_errors: u64,
+}
+
+/// A connected session. Frames arrive on [`Session::frames`].
+pub struct Session {
+    /// The server's welcome.
+    pub welcome: Welcome,
+    /// Complete, decoded frames, in order; closed when the session ends.
+    pub frames: mpsc::Receiver<Frame>,
+    conn: quinn::Connection,
+    endpoint: quinn::Endpoint,
+    stats: Arc<Mutex<SessionStats>>,
+    tasks: Vec<tokio::task::JoinHandle<()>>,
+}
+
+impl Session {
+    /// Current statistics.
+    pub fn stats(&self) -> SessionStats {
+        *self.stats.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Why the connection closed, once it has.
+    pub fn close_reason(&self) -> Option<quinn::ConnectionError> {
+        self.conn.close_reason()
+    }
+
+    /// Ends the session politely.
+    pub async fn close(self) {
+        self.conn.close(0u32.into(), b"client done");
+        for t in &self.tasks {
+            t.abort();
+        }
+        self.endpoint.wait_idle().await;
+    }
+}
+
+fn protocol_err(e: impl std::fmt::Display) -> ConnectError {
+    ConnectError::Protocol(e.to_string())
+}
+
+/// Connects, handshakes and starts receiving.
+pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
+    let tls = config.pin.client_config()?;
+    let crypto = quinn::crypto::rustls::QuicClientConfig::try_from(tls).map_err(protocol_err)?;
+    let mut client_config = quinn::ClientConfig::new(Arc::new(crypto));
+    let mut transport = quinn::TransportConfig::default();
+    transport
+        .max_concurrent_uni_streams(64u32.into())
+        .stream_receive_window((64u32 << 20).into())
+        .receive_window((256u32 << 20).into())
+        .keep_alive_interval(Some(Duration::from_secs(2)));
+    client_config.transport_config(Arc::new(transport));
+    let bind: SocketAddr = if config.addr.is_ipv6() {
+        "[::]:0".parse().map_err(protocol_err)?
+    } else {
+        "0.0.0.0:0".parse().map_err(protocol_err)?
+    };
+    let endpoint = quinn::Endpoint::client(bind)?;
+    let conn = endpoint
+        .connect_with(client_config, config.addr, &config.server_name)?
+        .await?;
+
+    let (mut send, mut recv) = conn.open_bi().await?;
+    let hello = Message::Hello(Hello {
+        version: config.version,
+        client_name: config.client_name.clone(),
+        token: config.token.clone(),
+        codecs: vec![Codec::Raw, Codec::Zstd],
+        max_size: FrameSize::new(config.limits.max_dimension, config.limits.max_dimension),
+        window_modes: vec![WindowMode::KeepDensity, WindowMode::KeepSize],
+        extras: vec![],
+    });
+    let mut bytes = wire::encode(&hello).map_err(protocol_err)?;
+    if config.version != WIRE_VERSION {
+        // Announce the version in the header as well, as that client would.
+        bytes[4..6].copy_from_slice(&config.version.to_le_bytes());
+    }
+    send.write_all(&bytes).await.map_err(protocol_err)?;
+    let mut decoder = Decoder::new(config.limits);
+    let answer = tokio::time::timeout(
+        Duration::from_secs(10),
+        read_message(&mut recv, &mut decoder),
+    )
+    .await
+    .map_err(|_| ConnectError::Timeout("the welcome"))?;
+    let welcome = match answer {
+        Ok(Some(Message::Welcome(w))) => w,
+        Ok(Some(Message::Reject(r))) => return Err(ConnectError::Rejected(r)),
+        Ok(Some(other)) => {
+            return Err(protocol_err(format!(
+                "expected Welcome, got {:?}",
+                other.kind()
+            )));
+        }
+        Ok(None) => {
+            // The server closed: report its reason if it gave one.
+            return Err(match conn.close_reason() {
+                Some(e) => ConnectError::Connection(e),
+                None => protocol_err("control stream closed before the welcome"),
+            });
+        }
+        Err(e) => {
+            return Err(match conn.close_reason() {
+                Some(e) => ConnectError::Connection(e),
+                None => protocol_err(e),
+            });
+        }
+    };
+
+    let stats = Arc::new(Mutex::new(SessionStats::default()));
+    let (frames_tx, frames_rx) = mpsc::channel(config.queue.max(1));
+    let (chunks_tx, chunks_rx) = mpsc::channel::<StreamEvent>(256);
+    let cancelled = Arc::new(Mutex::new(HashSet::new()));
+    let tasks = vec![
+        tokio::spawn(accept_streams(conn.clone(), chunks_tx, cancelled.clone())),
+        tokio::spawn(assemble(
+            conn.clone(),
+            config.limits,
+            chunks_rx,
+            frames_tx,
+            cancelled,
+            stats.clone(),
+        )),
+        tokio::spawn(control(conn.clone(), send, recv, decoder, stats.clone())),
+    ];
+    Ok(Session {
+        welcome,
+        frames: frames_rx,
+        conn,
+        endpoint,
+        stats,
+        tasks,
+    })
+}
+
+async fn read_message(
+    recv: &mut quinn::RecvStream,
+    decoder: &mut Decoder,
+) -> Result<Option<Message>, ConnectError> {
+    loop {
+        if let Some(m) = decoder.next_message().map_err(protocol_err)? {
+            return Ok(Some(m));
+        }
+        match recv
+            .read_chunk(64 * 1024, true)
+            .await
+            .map_err(protocol_err)?
+        {
+            Some(chunk) => decoder.feed(&chunk.bytes),
+            None => return Ok(None),
+        }
+    }
+}
+
+enum StreamEvent {
+    Data(StreamId, bytes::Bytes),
+    End(StreamId),
+    Reset(StreamId),
+}
+
+/// Accepts frame streams; one reader task per stream forwards its chunks.
+async fn accept_streams(
+    conn: quinn::Connection,
+    tx: mpsc::Sender<StreamEvent>,
+    cancelled: Arc<Mutex<HashSet<StreamId>>>,
+) {
+    while let Ok(mut recv) = conn.accept_uni().await {
+        let (tx, cancelled) = (tx.clone(), cancelled.clone());
+        tokio::spawn(async move {
+            let id = recv.id().index();
+            loop {
+                if cancelled.lock().map(|c| c.contains(&id)).unwrap_or(false) {
+                    let _ = recv.stop(0u32.into());
+                    return;
+                }
+                match recv.read_chunk(256 * 1024, true).await {
+                    Ok(Some(chunk)) => {
+                        if tx.send(StreamEvent::Data(id, chunk.bytes)).await.is_err() {
+                            return;
+                        }
+                    }
+                    Ok(None) => {
+                        let _ = tx.send(StreamEvent::End(id)).await;
+                        return;
+                    }
+                    Err(_) => {
+                        let _ = tx.send(StreamEvent::Reset(id)).await;
+                        return;
+                    }
+                }
+            }
+        });
+    }
+}
+
+/// Owns the [`FrameReceiver`]: reassembles, orders, decodes, delivers.
+async fn assemble(
+    conn: quinn::Connection,
+    limits: Limits,
+    mut rx: mpsc::Receiver<StreamEvent>,
+    frames: mpsc::Sender<Frame>,
+    cancelled: Arc<Mutex<HashSet<StreamId>>>,
+    stats: Arc<Mutex<SessionStats>>,
+) {
+    let mut receiver = FrameReceiver::new(limits, 64);
+    let fail = |e: ReceiveError| {
+        tracing::warn!("closing: {e}");
+        conn.close(2u32.into(), e.to_string().as_bytes());
+    };
+    while let Some(event) = rx.recv().await {
+        let delivery = match event {
+            StreamEvent::Data(id, bytes) => match receiver.on_data(id, &bytes) {
+                Ok(d) => Some(d),
+                Err(e) => {
+                    if let Ok(mut s) = stats.lock() {
+                        s.stream_errors += 1;
+                    }
+                    fail(e);
+                    None
+                }
+            },
+            StreamEvent::End(id) => {
+                if let Err(e) = receiver.on_stream_end(id) {
+                    if let Ok(mut s) = stats.lock() {
+                        s.stream_errors += 1;
+                    }
+                    fail(e);
+                }
+                None
+            }
+            StreamEvent::Reset(id) => {
+                receiver.on_stream_reset(id);
+                None
+            }
+        };
+        if let Ok(mut s) = stats.lock() {
+            s.client = ClientStats {
+                rtt_us: conn.rtt().as_micros() as u64,
+                ..receiver.stats()
+            };
+        }
+        let Some(delivery) = delivery else { continue };
+        if !delivery.cancel.is_empty() {
+            if let Ok(mut c) = cancelled.lock() {
+                c.extend(delivery.cancel.iter().copied());
+            }
+        }
+        if let Some(encoded) = delivery.frame {
+            match encoded.decode() {
+                Ok(frame) => {
+                    if frames.send(frame).await.is_err() {
+                        return;
+                    }
+                }
+                Err(e) => {
+                    fail(ReceiveError::Stream {
+                        stream: 0,
+                        source: e,
+                    });
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// Reports stats and pings every second; reads the server's stats.
+async fn control(
+    conn: quinn::Connection,
+    mut send: quinn::SendStream,
+    mut recv: quinn::RecvStream,
+    mut decoder: Decoder,
+    stats: Arc<Mutex<SessionStats>>,
+) {
+    let reader = {
+        let stats = stats.clone();
+        async move {
+            while let Ok(Some(msg)) = read_message(&mut recv, &mut decoder).await {
+                if let Message::ServerStats(s) = msg {
+                    if let Ok(mut st) = stats.lock() {
+                        st.server = Some(s);
+                    }
+                }
+            }
+        }
+    };
+    let writer = async {
+        let start = Instant::now();
+        let mut tick = tokio::time::interval(Duration::from_secs(1));
+        let mut seq = 0;
+        loop {
+            tick.tick().await;
+            seq += 1;
+            let ping = Message::Ping(Ping {
+                seq,
+                sent_us: start.elapsed().as_micros() as u64,
+            });
+            if let Ok(bytes) = wire::encode(&ping) {
+                let _ = conn.send_datagram(bytes.into());
+            }
+            let report = stats.lock().map(|s| s.client).unwrap_or_default();
+            let Ok(bytes) = wire::encode(&Message::ClientStats(report)) else {
+                return;
+            };
+            if send.write_all(&bytes).await.is_err() {
+                return;
+            }
+        }
+    };
+    tokio::select! {
+        () = reader => {}
+        () = writer => {}
+    }
+}

@@ -1,0 +1,350 @@
+//! The QUIC streaming endpoint (DESIGN §7).
+//!
+//! Per connection: the client opens the control stream and sends a
+//! [`Hello`]; the server answers [`Welcome`] or [`Reject`] (then closes).
+//! After a welcome every frame goes out on a unidirectional stream of its
+//! own, at most [`MAX_IN_FLIGHT`] at a time: when a client cannot keep up,
+//! new frames are dropped for it (and counted) instead of queueing, so a slow
+//! client costs the others nothing. Stats go both ways on the control
+//! stream; pings and input arrive as datagrams.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use protocol::Limits;
+use protocol::wire::{self, Decoder, Hello, Message, Pong, ServerStats};
+use tokio::sync::{Semaphore, broadcast};
+
+use crate::session::{self, Policy};
+use crate::source::StreamFrame;
+
+/// Most frame streams one client may have open at once.
+pub const MAX_IN_FLIGHT: usize = 3;
+/// How long a client has to send its hello.
+pub const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// QUIC application error codes used when closing.
+pub mod close_code {
+    /// Normal end.
+    pub const DONE: u32 = 0;
+    /// The handshake was refused (the reason was sent first).
+    pub const REJECTED: u32 = 1;
+    /// The peer broke the protocol.
+    pub const PROTOCOL: u32 = 2;
+    /// The server is shutting down.
+    pub const SHUTDOWN: u32 = 3;
+}
+
+/// Per-client counters, shared with the server for reports.
+#[derive(Debug, Default)]
+pub struct ClientCounters {
+    /// Frame streams completed.
+    pub sent: AtomicU64,
+    /// Frames dropped because the client was behind.
+    pub dropped: AtomicU64,
+    /// Payload bytes written.
+    pub bytes: AtomicU64,
+}
+
+/// Server-wide counters.
+#[derive(Debug, Default)]
+pub struct ServerCounters {
+    /// Connections accepted into a session.
+    pub sessions: AtomicU64,
+    /// Connections refused or broken during the handshake.
+    pub refused: AtomicU64,
+    /// Frames sent over all sessions.
+    pub frames_sent: AtomicU64,
+    /// Frames dropped over all sessions.
+    pub frames_dropped: AtomicU64,
+}
+
+/// A running endpoint.
+pub struct Server {
+    endpoint: quinn::Endpoint,
+    /// Counters over all sessions.
+    pub counters: Arc<ServerCounters>,
+    accept: tokio::task::JoinHandle<()>,
+}
+
+impl Server {
+    /// Binds `addr` and serves frames from `frames` to every client that
+    /// passes `policy`.
+    pub fn start(
+        addr: SocketAddr,
+        config: quinn::ServerConfig,
+        policy: Policy,
+        frames: broadcast::Sender<Arc<StreamFrame>>,
+    ) -> std::io::Result<Self> {
+        let endpoint = quinn::Endpoint::server(config, addr)?;
+        let counters = Arc::new(ServerCounters::default());
+        let accept = tokio::spawn(accept_loop(
+            endpoint.clone(),
+            Arc::new(policy),
+            frames,
+            counters.clone(),
+        ));
+        Ok(Self {
+            endpoint,
+            counters,
+            accept,
+        })
+    }
+
+    /// The bound address (with the real port when 0 was asked for).
+    pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
+        self.endpoint.local_addr()
+    }
+
+    /// Closes every connection with a reason and stops accepting.
+    pub async fn shutdown(self) {
+        self.endpoint
+            .close(close_code::SHUTDOWN.into(), b"server shutting down");
+        self.accept.abort();
+        self.endpoint.wait_idle().await;
+    }
+}
+
+async fn accept_loop(
+    endpoint: quinn::Endpoint,
+    policy: Arc<Policy>,
+    frames: broadcast::Sender<Arc<StreamFrame>>,
+    counters: Arc<ServerCounters>,
+) {
+    let mut next_session = 1u64;
+    while let Some(incoming) = endpoint.accept().await {
+        let (policy, frames, counters) = (policy.clone(), frames.clone(), counters.clone());
+        let session_id = next_session;
+        next_session += 1;
+        tokio::spawn(async move {
+            let peer = incoming.remote_address();
+            match connection(incoming, &policy, session_id, &frames, &counters).await {
+                Ok(()) => tracing::info!(session_id, %peer, "session ended"),
+                Err(e) => tracing::warn!(session_id, %peer, "session failed: {e:#}"),
+            }
+        });
+    }
+}
+
+/// Reads one message from a stream with a decoder, within `limits`.
+async fn read_message(
+    recv: &mut quinn::RecvStream,
+    decoder: &mut Decoder,
+) -> anyhow::Result<Option<Message>> {
+    loop {
+        if let Some(m) = decoder.next_message()? {
+            return Ok(Some(m));
+        }
+        match recv.read_chunk(64 * 1024, true).await? {
+            Some(chunk) => decoder.feed(&chunk.bytes),
+            None => return Ok(None),
+        }
+    }
+}
+
+async fn connection(
+    incoming: quinn::Incoming,
+    policy: &Policy,
+    session_id: u64,
+    frames: &broadcast::Sender<Arc<StreamFrame>>,
+    counters: &ServerCounters,
+) -> anyhow::Result<()> {
+    let conn = incoming.await?;
+    let handshake = async {
+        let (send, mut recv) = conn.accept_bi().await?;
+        let mut decoder = Decoder::new(Limits::default());
+        let hello = match read_message(&mut recv, &mut decoder).await {
+            Ok(Some(Message::Hello(h))) => Ok(h),
+            Ok(Some(other)) => Err(anyhow::anyhow!("expected Hello, got {:?}", other.kind())),
+            Ok(None) => Err(anyhow::anyhow!("control stream ended before Hello")),
+            Err(e) => Err(e),
+        };
+        anyhow::Ok((send, recv, decoder, hello))
+    };
+    let (mut send, recv, decoder, hello) =
+        match tokio::time::timeout(HELLO_TIMEOUT, handshake).await {
+            Ok(r) => r?,
+            Err(_) => {
+                counters.refused.fetch_add(1, Ordering::Relaxed);
+                conn.close(close_code::PROTOCOL.into(), b"no hello in time");
+                anyhow::bail!("no hello within {HELLO_TIMEOUT:?}");
+            }
+        };
+    let hello: Hello = match hello {
+        Ok(h) => h,
+        Err(e) => {
+            counters.refused.fetch_add(1, Ordering::Relaxed);
+            let reason = format!("bad hello: {e:#}");
+            // A client of another wire version gets told which one we speak.
+            let code = match e.downcast_ref::<wire::WireError>() {
+                Some(wire::WireError::UnsupportedVersion { supported, .. }) => {
+                    wire::RejectReason::UnsupportedVersion { server: *supported }
+                }
+                _ => wire::RejectReason::BadRequest,
+            };
+            let reject = Message::Reject(wire::Reject {
+                reason: code,
+                message: reason.clone(),
+            });
+            let _ = send.write_all(&wire::encode(&reject)?).await;
+            let _ = send.finish();
+            let _ = tokio::time::timeout(Duration::from_secs(1), send.stopped()).await;
+            conn.close(close_code::PROTOCOL.into(), reason.as_bytes());
+            anyhow::bail!(reason);
+        }
+    };
+    let welcome = match session::answer(policy, &hello, session_id) {
+        Ok(w) => w,
+        Err(reject) => {
+            counters.refused.fetch_add(1, Ordering::Relaxed);
+            send.write_all(&wire::encode(&Message::Reject(reject.clone()))?)
+                .await?;
+            send.finish()?;
+            // Let the refusal reach the client before closing.
+            let _ = tokio::time::timeout(Duration::from_secs(1), send.stopped()).await;
+            conn.close(close_code::REJECTED.into(), reject.message.as_bytes());
+            anyhow::bail!("refused {:?}: {}", reject.reason, reject.message);
+        }
+    };
+    counters.sessions.fetch_add(1, Ordering::Relaxed);
+    tracing::info!(session_id, client = %hello.client_name, "session started");
+    let mut rx = frames.subscribe();
+    send.write_all(&wire::encode(&Message::Welcome(welcome))?)
+        .await?;
+
+    let client = Arc::new(ClientCounters::default());
+    let control = tokio::spawn(control_loop(
+        conn.clone(),
+        send,
+        recv,
+        decoder,
+        client.clone(),
+    ));
+    let datagrams = tokio::spawn(datagram_loop(conn.clone()));
+    let permits = Arc::new(Semaphore::new(MAX_IN_FLIGHT));
+    let result = loop {
+        let frame = tokio::select! {
+            r = rx.recv() => r,
+            reason = conn.closed() => {
+                tracing::debug!(session_id, "closed: {reason}");
+                break Ok::<_, anyhow::Error>(());
+            }
+        };
+        let frame = match frame {
+            Ok(f) => f,
+            Err(broadcast::error::RecvError::Lagged(n)) => {
+                client.dropped.fetch_add(n, Ordering::Relaxed);
+                counters.frames_dropped.fetch_add(n, Ordering::Relaxed);
+                continue;
+            }
+            Err(broadcast::error::RecvError::Closed) => {
+                conn.close(close_code::DONE.into(), b"end of stream");
+                break Ok(());
+            }
+        };
+        let Ok(permit) = permits.clone().try_acquire_owned() else {
+            // The client is behind: drop this frame rather than queue it.
+            client.dropped.fetch_add(1, Ordering::Relaxed);
+            counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
+            continue;
+        };
+        let conn = conn.clone();
+        let client = client.clone();
+        tokio::spawn(async move {
+            let _permit = permit;
+            let sent = async {
+                let mut stream = conn.open_uni().await?;
+                stream.write_all(&frame.bytes).await?;
+                stream.finish()?;
+                anyhow::Ok(())
+            };
+            match sent.await {
+                Ok(()) => {
+                    client.sent.fetch_add(1, Ordering::Relaxed);
+                    client
+                        .bytes
+                        .fetch_add(frame.bytes.len() as u64, Ordering::Relaxed);
+                }
+                Err(e) => tracing::debug!("frame {} not sent: {e:#}", frame.index),
+            }
+        });
+    };
+    counters
+        .frames_sent
+        .fetch_add(client.sent.load(Ordering::Relaxed), Ordering::Relaxed);
+    control.abort();
+    datagrams.abort();
+    result
+}
+
+/// Sends [`ServerStats`] every second and reads the client's messages.
+async fn control_loop(
+    conn: quinn::Connection,
+    mut send: quinn::SendStream,
+    mut recv: quinn::RecvStream,
+    mut decoder: Decoder,
+    client: Arc<ClientCounters>,
+) {
+    let reader = async {
+        while let Ok(Some(msg)) = read_message(&mut recv, &mut decoder).await {
+            match msg {
+                Message::ClientStats(s) => tracing::debug!(?s, "client stats"),
+                Message::Bye(b) => {
+                    conn.close(close_code::DONE.into(), b.reason.as_bytes());
+                    return;
+                }
+                other => {
+                    conn.close(
+                        close_code::PROTOCOL.into(),
+                        format!("unexpected {:?}", other.kind()).as_bytes(),
+                    );
+                    return;
+                }
+            }
+        }
+    };
+    let writer = async {
+        let mut tick = tokio::time::interval(Duration::from_secs(1));
+        loop {
+            tick.tick().await;
+            let stats = Message::ServerStats(ServerStats {
+                frames_sent: client.sent.load(Ordering::Relaxed),
+                frames_dropped: client.dropped.load(Ordering::Relaxed),
+                bytes_sent: client.bytes.load(Ordering::Relaxed),
+            });
+            let Ok(bytes) = wire::encode(&stats) else {
+                return;
+            };
+            if send.write_all(&bytes).await.is_err() {
+                return;
+            }
+        }
+    };
+    tokio::select! {
+        () = reader => {}
+        () = writer => {}
+    }
+}
+
+/// Answers pings; logs input.
+async fn datagram_loop(conn: quinn::Connection) {
+    let limits = Limits::default();
+    while let Ok(d) = conn.read_datagram().await {
+        match wire::decode_message(&d, &limits) {
+            Ok((Message::Ping(p), _)) => {
+                let pong = Message::Pong(Pong {
+                    seq: p.seq,
+                    sent_us: p.sent_us,
+                });
+                if let Ok(bytes) = wire::encode(&pong) {
+                    let _ = conn.send_datagram(bytes.into());
+                }
+            }
+            Ok((Message::Input(i), _)) => tracing::trace!(seq = i.seq, "input"),
+            Ok((other, _)) => tracing::debug!("ignored datagram {:?}", other.kind()),
+            Err(e) => tracing::debug!("bad datagram: {e}"),
+        }
+    }
+}

@@ -1,0 +1,192 @@
+//! The server side of the handshake, sans-IO (DESIGN §7): a [`Hello`] is
+//! checked against the server's policy and answered with a [`Welcome`] or a
+//! [`Reject`] that says why.
+
+use protocol::wire::{
+    Hello, Reject, RejectReason, StreamBuffer, WIRE_VERSION, Welcome, WindowMode,
+};
+use protocol::{Codec, FrameSize};
+
+/// What the server offers and requires.
+#[derive(Clone, Debug)]
+pub struct Policy {
+    /// The access token clients must present.
+    pub token: String,
+    /// Name shown to clients.
+    pub server_name: String,
+    /// Displayed size of the stream.
+    pub size: FrameSize,
+    /// Largest rendered size (a widened window makes frames larger).
+    pub max_frame: FrameSize,
+    /// Render rate.
+    pub fps: f64,
+    /// Buffers every frame carries.
+    pub buffers: Vec<StreamBuffer>,
+    /// Window mode of the stream.
+    pub window_mode: WindowMode,
+}
+
+/// Compares two byte strings in time independent of where they differ.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = a.len() ^ b.len();
+    for i in 0..a.len().max(b.len()) {
+        diff |= usize::from(a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0xff));
+    }
+    diff == 0
+}
+
+/// Answers a hello: the welcome for session `session_id`, or a refusal.
+pub fn answer(policy: &Policy, hello: &Hello, session_id: u64) -> Result<Welcome, Reject> {
+    let reject = |reason, message: String| Reject { reason, message };
+    if hello.version != WIRE_VERSION {
+        return Err(reject(
+            RejectReason::UnsupportedVersion {
+                server: WIRE_VERSION,
+            },
+            format!(
+                "client speaks wire version {}, server speaks {WIRE_VERSION}",
+                hello.version
+            ),
+        ));
+    }
+    if !constant_time_eq(hello.token.as_bytes(), policy.token.as_bytes()) {
+        return Err(reject(
+            RejectReason::BadToken,
+            "wrong or missing access token".into(),
+        ));
+    }
+    if let Some(b) = policy
+        .buffers
+        .iter()
+        .find(|b| b.codec != Codec::Raw && !hello.codecs.contains(&b.codec))
+    {
+        return Err(reject(
+            RejectReason::Incompatible,
+            format!(
+                "the stream needs codec {:?} for {:?}, which the client does not decode",
+                b.codec, b.kind
+            ),
+        ));
+    }
+    if policy.max_frame.width > hello.max_size.width
+        || policy.max_frame.height > hello.max_size.height
+    {
+        return Err(reject(
+            RejectReason::Incompatible,
+            format!(
+                "frames up to {}x{} exceed the client's maximum {}x{}",
+                policy.max_frame.width,
+                policy.max_frame.height,
+                hello.max_size.width,
+                hello.max_size.height
+            ),
+        ));
+    }
+    if policy.window_mode != WindowMode::Off && !hello.window_modes.contains(&policy.window_mode) {
+        return Err(reject(
+            RejectReason::Incompatible,
+            format!(
+                "the stream uses window mode {:?}, which the client cannot crop",
+                policy.window_mode
+            ),
+        ));
+    }
+    Ok(Welcome {
+        session_id,
+        server_name: policy.server_name.clone(),
+        size: policy.size,
+        fps: policy.fps,
+        buffers: policy.buffers.clone(),
+        window_mode: policy.window_mode,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn policy() -> Policy {
+        Policy {
+            token: "secret".into(),
+            server_name: "test".into(),
+            size: FrameSize::new(64, 36),
+            max_frame: FrameSize::new(96, 54),
+            fps: 30.0,
+            buffers: StreamBuffer::default_set(Codec::Raw).to_vec(),
+            window_mode: WindowMode::Off,
+        }
+    }
+
+    fn hello() -> Hello {
+        Hello {
+            version: WIRE_VERSION,
+            client_name: "c".into(),
+            token: "secret".into(),
+            codecs: vec![Codec::Raw, Codec::Zstd],
+            max_size: FrameSize::new(8192, 8192),
+            window_modes: vec![WindowMode::KeepDensity, WindowMode::KeepSize],
+            extras: vec![],
+        }
+    }
+
+    #[test]
+    fn good_hello_is_welcomed() {
+        let w = answer(&policy(), &hello(), 7).unwrap();
+        assert_eq!(
+            (w.session_id, w.size, w.fps),
+            (7, FrameSize::new(64, 36), 30.0)
+        );
+    }
+
+    #[test]
+    fn refusals_say_why() {
+        let p = policy();
+        let mut h = hello();
+        h.token = "secreT".into();
+        assert_eq!(
+            answer(&p, &h, 1).unwrap_err().reason,
+            RejectReason::BadToken
+        );
+        h.token = String::new();
+        assert_eq!(
+            answer(&p, &h, 1).unwrap_err().reason,
+            RejectReason::BadToken
+        );
+        let mut h = hello();
+        h.version = 99;
+        assert_eq!(
+            answer(&p, &h, 1).unwrap_err().reason,
+            RejectReason::UnsupportedVersion {
+                server: WIRE_VERSION
+            }
+        );
+        let mut h = hello();
+        h.codecs = vec![Codec::Raw];
+        let e = answer(&p, &h, 1).unwrap_err();
+        assert_eq!(e.reason, RejectReason::Incompatible);
+        assert!(e.message.contains("Zstd"), "{}", e.message);
+        let mut h = hello();
+        h.max_size = FrameSize::new(64, 36);
+        assert_eq!(
+            answer(&p, &h, 1).unwrap_err().reason,
+            RejectReason::Incompatible
+        );
+        let mut windowed = policy();
+        windowed.window_mode = WindowMode::KeepDensity;
+        let mut h = hello();
+        h.window_modes.clear();
+        assert_eq!(
+            answer(&windowed, &h, 1).unwrap_err().reason,
+            RejectReason::Incompatible
+        );
+    }
+
+    #[test]
+    fn token_comparison_is_exact() {
+        assert!(constant_time_eq(b"abc", b"abc"));
+        assert!(!constant_time_eq(b"abc", b"abd"));
+        assert!(!constant_time_eq(b"abc", b"ab"));
+        assert!(!constant_time_eq(b"", b"a"));
+        assert!(constant_time_eq(b"", b""));
+    }
+}

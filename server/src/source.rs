@@ -1,0 +1,254 @@
+//! Where streamed frames come from: the renderer or a dump, on a thread of
+//! its own, paced by simulation time ([`crate::pacer`]), encoded once and
+//! shared by every client through a broadcast channel. A client that lags
+//! loses the oldest frames (counted as drops) and never slows the producer.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use protocol::assemble::encode_frame;
+use protocol::dump::DumpReader;
+use protocol::wire::StreamBuffer;
+use protocol::{Frame, FrameSize};
+use tokio::sync::broadcast;
+
+use crate::pacer::{Pace, Pacer};
+use crate::render::{Renderer, WindowSettings};
+use crate::scene::Scene;
+
+/// One frame, encoded as the bytes of its per-frame stream.
+#[derive(Debug)]
+pub struct StreamFrame {
+    /// The frame's index.
+    pub index: u64,
+    /// Header message then payload messages.
+    pub bytes: Vec<u8>,
+    /// Encoded payload size per buffer, for reports.
+    pub buffer_bytes: Vec<(protocol::BufferKind, u64)>,
+}
+
+/// What to stream.
+#[derive(Clone, Debug)]
+pub enum SourceSpec {
+    /// Render a scene live.
+    Scene {
+        /// `builtin:NAME` or a RON path.
+        spec: String,
+        /// Displayed size.
+        size: FrameSize,
+        /// Render rate.
+        fps: f64,
+        /// Adaptive window.
+        window: WindowSettings,
+        /// Directory for relative glTF paths.
+        base: PathBuf,
+    },
+    /// Replay a dump at its own rate.
+    Dump {
+        /// The dump directory.
+        dir: PathBuf,
+        /// Start again after the last frame.
+        looped: bool,
+    },
+}
+
+/// Counters of the producer.
+#[derive(Debug, Default)]
+pub struct SourceStats {
+    /// Frames produced and broadcast.
+    pub produced: AtomicU64,
+    /// Frames skipped by the pacer because production fell behind.
+    pub skipped: AtomicU64,
+}
+
+/// A running producer thread.
+pub struct Source {
+    /// Subscribe here to receive frames.
+    pub frames: broadcast::Sender<Arc<StreamFrame>>,
+    /// Counters.
+    pub stats: Arc<SourceStats>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// How many frames a lagging client may be behind before it loses the
+/// oldest: a couple of frames is all a real-time stream can use.
+pub const BROADCAST_DEPTH: usize = 4;
+
+impl Source {
+    /// A channel for [`Source::start`] with [`BROADCAST_DEPTH`].
+    pub fn channel() -> broadcast::Sender<Arc<StreamFrame>> {
+        broadcast::channel(BROADCAST_DEPTH).0
+    }
+
+    /// Starts producing `spec` with `buffers` into `frames`. Fails early if
+    /// the scene or dump cannot be opened.
+    pub fn start(
+        spec: SourceSpec,
+        buffers: Vec<StreamBuffer>,
+        frames: broadcast::Sender<Arc<StreamFrame>>,
+    ) -> anyhow::Result<Self> {
+        let stats = Arc::new(SourceStats::default());
+        let stop = Arc::new(AtomicBool::new(false));
+        let mut producer = Producer::open(&spec)?;
+        let thread = {
+            let (frames, stats, stop) = (frames.clone(), stats.clone(), stop.clone());
+            std::thread::Builder::new()
+                .name("frame source".into())
+                .spawn(move || {
+                    if let Err(e) = producer.run(&frames, &buffers, &stats, &stop) {
+                        tracing::error!("frame source stopped: {e:#}");
+                    }
+                })?
+        };
+        Ok(Self {
+            frames,
+            stats,
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    /// Stops the producer and waits for it.
+    pub fn stop(mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for Source {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+enum Producer {
+    Scene { renderer: Box<Renderer>, fps: f64 },
+    Dump { reader: DumpReader, looped: bool },
+}
+
+impl Producer {
+    fn open(spec: &SourceSpec) -> anyhow::Result<Self> {
+        Ok(match spec {
+            SourceSpec::Scene {
+                spec,
+                size,
+                fps,
+                window,
+                base,
+            } => {
+                anyhow::ensure!(fps.is_finite() && *fps > 0.0, "fps must be > 0");
+                let mut renderer = Renderer::new(Scene::load(spec)?, *size, base)?;
+                renderer.set_window(*window);
+                Producer::Scene {
+                    renderer: Box::new(renderer),
+                    fps: *fps,
+                }
+            }
+            SourceSpec::Dump { dir, looped } => {
+                let reader = DumpReader::open(dir)?;
+                anyhow::ensure!(!reader.is_empty(), "the dump has no frames");
+                Producer::Dump {
+                    reader,
+                    looped: *looped,
+                }
+            }
+        })
+    }
+
+    /// Simulation time of frame `k` and the next one.
+    fn times(&self, k: u64) -> anyhow::Result<(f64, Option<f64>)> {
+        Ok(match self {
+            Producer::Scene { fps, .. } => (k as f64 / fps, Some((k + 1) as f64 / fps)),
+            Producer::Dump { reader, .. } => {
+                let n = reader.len();
+                let t = reader.read_meta(k % n)?.time;
+                let next = if k % n + 1 < n {
+                    Some(reader.read_meta(k % n + 1)?.time)
+                } else {
+                    None
+                };
+                (t, next)
+            }
+        })
+    }
+
+    fn frame(&mut self, k: u64) -> anyhow::Result<Frame> {
+        Ok(match self {
+            Producer::Scene { renderer, fps } => renderer.render(k, *fps)?,
+            Producer::Dump { reader, looped } => {
+                let mut f = reader.read_frame(k % reader.len())?;
+                if *looped {
+                    // Indices keep increasing across loops, so clients do
+                    // not take the second loop for late frames.
+                    f.meta.index = k;
+                }
+                f
+            }
+        })
+    }
+
+    fn finished(&self, k: u64) -> bool {
+        match self {
+            Producer::Scene { .. } => false,
+            Producer::Dump { reader, looped } => !looped && k >= reader.len(),
+        }
+    }
+
+    fn run(
+        &mut self,
+        frames: &broadcast::Sender<Arc<StreamFrame>>,
+        buffers: &[StreamBuffer],
+        stats: &SourceStats,
+        stop: &AtomicBool,
+    ) -> anyhow::Result<()> {
+        let epoch = Instant::now();
+        let mut pacer = Pacer::new(1.0);
+        let mut k = 0u64;
+        while !stop.load(Ordering::Relaxed) && !self.finished(k) {
+            let (t, next) = self.times(k)?;
+            match pacer.decide(epoch.elapsed(), t, next) {
+                Pace::WaitUntil(at) => {
+                    let wait = at
+                        .saturating_sub(epoch.elapsed())
+                        .min(Duration::from_millis(50));
+                    std::thread::sleep(wait);
+                    continue;
+                }
+                Pace::Skip => {
+                    stats.skipped.fetch_add(1, Ordering::Relaxed);
+                    k += 1;
+                    continue;
+                }
+                Pace::Send => {}
+            }
+            let started = Instant::now();
+            let mut frame = self.frame(k)?;
+            let encoded = encode_frame(&frame, buffers, protocol::codec::DEFAULT_ZSTD_LEVEL)?;
+            // Host processing = render (or read) + encode, as a duration.
+            frame.meta.host_processing += started.elapsed();
+            let mut encoded = encoded;
+            encoded.header.meta.host_processing = frame.meta.host_processing;
+            let bytes = encoded.to_stream_bytes()?;
+            let buffer_bytes = encoded
+                .header
+                .buffers
+                .iter()
+                .map(|b| (b.kind, b.payload_len))
+                .collect();
+            // No receivers yet is fine: clients join a live stream.
+            let _ = frames.send(Arc::new(StreamFrame {
+                index: frame.meta.index,
+                bytes,
+                buffer_bytes,
+            }));
+            stats.produced.fetch_add(1, Ordering::Relaxed);
+            k += 1;
+        }
+        Ok(())
+    }
+}
