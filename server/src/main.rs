@@ -10,6 +10,7 @@ use protocol::dump::{DumpWriter, Manifest};
 use protocol::wire::WindowMode;
 use server::render::{Renderer, WindowSettings, plan};
 use server::scene::{Scene, builtin};
+use server::source::{Source, SourceSpec};
 
 #[derive(Parser)]
 #[command(version, about = "Frame-generation streaming server")]
@@ -49,6 +50,40 @@ enum Command {
         #[arg(long, default_value = "off", value_parser = parse_window)]
         window: WindowMode,
     },
+    /// Stream a scene (rendered live) or a dump over QUIC to clients.
+    Serve {
+        /// `builtin:NAME` or a RON scene file (ignored with --dump).
+        #[arg(default_value = "builtin:default")]
+        scene: String,
+        /// Replay this dump instead of rendering.
+        #[arg(long)]
+        dump: Option<PathBuf>,
+        /// Loop the dump.
+        #[arg(long = "loop")]
+        looped: bool,
+        /// Address to listen on.
+        #[arg(long, default_value = "127.0.0.1:4433")]
+        listen: std::net::SocketAddr,
+        /// Where the TLS certificate and key live (created on first start).
+        #[arg(long, default_value = "server-identity")]
+        identity: PathBuf,
+        /// Access token clients must present; a random one is made and
+        /// printed if absent.
+        #[arg(long, env = "FRAMEGEN_TOKEN")]
+        token: Option<String>,
+        /// Render rate for scenes.
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// Displayed size for scenes, WIDTHxHEIGHT.
+        #[arg(long, default_value = "640x360", value_parser = parse_size)]
+        size: FrameSize,
+        /// Adaptive rendering window for scenes.
+        #[arg(long, default_value = "off", value_parser = parse_window)]
+        window: WindowMode,
+        /// Color codec (depth and motion always use zstd).
+        #[arg(long, default_value = "raw", value_parser = parse_codec)]
+        color_codec: protocol::Codec,
+    },
     /// Show what a scene declares and which passes it builds.
     Info {
         /// `builtin:NAME` or a path; omit with --list.
@@ -62,6 +97,14 @@ enum Command {
         /// The dump directory (holding manifest.json).
         dir: PathBuf,
     },
+}
+
+fn parse_codec(s: &str) -> Result<protocol::Codec, String> {
+    match s {
+        "raw" => Ok(protocol::Codec::Raw),
+        "zstd" => Ok(protocol::Codec::Zstd),
+        _ => Err("expected raw or zstd".into()),
+    }
 }
 
 fn parse_window(s: &str) -> Result<WindowMode, String> {
@@ -110,6 +153,52 @@ fn main() -> anyhow::Result<()> {
             window,
         }),
         Command::Info { scene, list } => info(scene.as_deref(), list),
+        Command::Serve {
+            scene,
+            dump,
+            looped,
+            listen,
+            identity,
+            token,
+            fps,
+            size,
+            window,
+            color_codec,
+        } => {
+            let (source, size, fps) = match dump {
+                Some(dir) => {
+                    let reader = protocol::dump::DumpReader::open(&dir)?;
+                    let m = reader.manifest();
+                    let (size, fps) = (m.size(), m.fps);
+                    (SourceSpec::Dump { dir, looped }, size, fps)
+                }
+                None => (
+                    SourceSpec::Scene {
+                        base: scene_base(&scene),
+                        spec: scene,
+                        size,
+                        fps,
+                        window: WindowSettings {
+                            mode: window,
+                            ..WindowSettings::default()
+                        },
+                    },
+                    size,
+                    fps,
+                ),
+            };
+            let runtime = tokio::runtime::Runtime::new()?;
+            runtime.block_on(serve(ServeArgs {
+                source,
+                size,
+                fps,
+                listen,
+                identity,
+                token,
+                window,
+                color_codec,
+            }))
+        }
         Command::Inspect { dir } => inspect(&dir),
     }
 }
@@ -228,6 +317,80 @@ fn write_png(path: &Path, frame: &protocol::Frame) -> anyhow::Result<()> {
         image::ExtendedColorType::Rgb8,
     )
     .with_context(|| format!("writing {}", path.display()))
+}
+
+struct ServeArgs {
+    source: SourceSpec,
+    size: FrameSize,
+    fps: f64,
+    listen: std::net::SocketAddr,
+    identity: PathBuf,
+    token: Option<String>,
+    window: WindowMode,
+    color_codec: protocol::Codec,
+}
+
+async fn serve(args: ServeArgs) -> anyhow::Result<()> {
+    let identity = server::tls::Identity::load_or_create(&args.identity)?;
+    let token = args.token.unwrap_or_else(|| {
+        use rand::Rng;
+        let bytes: [u8; 16] = rand::rng().random();
+        bytes.iter().map(|b| format!("{b:02x}")).collect()
+    });
+    let buffers = protocol::wire::StreamBuffer::default_set(args.color_codec).to_vec();
+    // A widened window can make frames up to 1.5× larger per side.
+    let max_frame = match args.window {
+        WindowMode::KeepDensity => {
+            FrameSize::new(args.size.width * 3 / 2 + 1, args.size.height * 3 / 2 + 1)
+        }
+        _ => args.size,
+    };
+    let policy = server::session::Policy {
+        token: token.clone(),
+        server_name: "framegen-stream server".into(),
+        size: args.size,
+        max_frame,
+        fps: args.fps,
+        buffers: buffers.clone(),
+        window_mode: args.window,
+    };
+    let frames = Source::channel();
+    let server = server::serve::Server::start(
+        args.listen,
+        identity.quic_server_config()?,
+        policy,
+        frames.clone(),
+    )?;
+    let source = Source::start(args.source, buffers, frames)?;
+    println!("listening on {}", server.local_addr()?);
+    println!("certificate SHA-256: {}", identity.fingerprint());
+    println!("token: {token}");
+    println!(
+        "connect with: client connect {} --pin {} --token {token}",
+        server.local_addr()?,
+        identity.fingerprint()
+    );
+    tokio::signal::ctrl_c().await?;
+    println!("shutting down");
+    let produced = source
+        .stats
+        .produced
+        .load(std::sync::atomic::Ordering::Relaxed);
+    let skipped = source
+        .stats
+        .skipped
+        .load(std::sync::atomic::Ordering::Relaxed);
+    let c = &server.counters;
+    println!(
+        "frames produced {produced}, skipped by the pacer {skipped}; sessions {}, refused {}, frames sent {}, dropped for slow clients {}",
+        c.sessions.load(std::sync::atomic::Ordering::Relaxed),
+        c.refused.load(std::sync::atomic::Ordering::Relaxed),
+        c.frames_sent.load(std::sync::atomic::Ordering::Relaxed),
+        c.frames_dropped.load(std::sync::atomic::Ordering::Relaxed),
+    );
+    server.shutdown().await;
+    source.stop();
+    Ok(())
 }
 
 fn info(spec: Option<&str>, list: bool) -> anyhow::Result<()> {
