@@ -102,6 +102,7 @@ pub struct Session {
     conn: quinn::Connection,
     endpoint: quinn::Endpoint,
     stats: Arc<Mutex<SessionStats>>,
+    failure: Arc<Mutex<Option<String>>>,
     tasks: Vec<tokio::task::JoinHandle<()>>,
 }
 
@@ -109,6 +110,11 @@ impl Session {
     /// Current statistics.
     pub fn stats(&self) -> SessionStats {
         *self.stats.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The protocol violation that ended the session, if one did.
+    pub fn failure(&self) -> Option<String> {
+        self.failure.lock().ok().and_then(|f| f.clone())
     }
 
     /// Why the connection closed, once it has.
@@ -203,6 +209,7 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
     let (frames_tx, frames_rx) = mpsc::channel(config.queue.max(1));
     let (chunks_tx, chunks_rx) = mpsc::channel::<StreamEvent>(256);
     let cancelled = Arc::new(Mutex::new(HashSet::new()));
+    let failure = Arc::new(Mutex::new(None));
     let tasks = vec![
         tokio::spawn(accept_streams(conn.clone(), chunks_tx, cancelled.clone())),
         tokio::spawn(assemble(
@@ -212,6 +219,7 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
             frames_tx,
             cancelled,
             stats.clone(),
+            failure.clone(),
         )),
         tokio::spawn(control(conn.clone(), send, recv, decoder, stats.clone())),
     ];
@@ -221,6 +229,7 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
         conn,
         endpoint,
         stats,
+        failure,
         tasks,
     })
 }
@@ -293,30 +302,34 @@ async fn assemble(
     frames: mpsc::Sender<Frame>,
     cancelled: Arc<Mutex<HashSet<StreamId>>>,
     stats: Arc<Mutex<SessionStats>>,
+    failure: Arc<Mutex<Option<String>>>,
 ) {
     let mut receiver = FrameReceiver::new(limits, 64);
     let fail = |e: ReceiveError| {
-        tracing::warn!("closing: {e}");
-        conn.close(2u32.into(), e.to_string().as_bytes());
+        let reason = e.to_string();
+        tracing::warn!("closing: {reason}");
+        conn.close(2u32.into(), reason.as_bytes());
+        if let Ok(mut f) = failure.lock() {
+            f.get_or_insert(reason);
+        }
+    };
+    // A stream that breaks the protocol ends the session: the server is
+    // broken or hostile, and nothing it sends can be trusted after that.
+    let broken = |e: ReceiveError| {
+        if let Ok(mut s) = stats.lock() {
+            s.stream_errors += 1;
+        }
+        fail(e);
     };
     while let Some(event) = rx.recv().await {
         let delivery = match event {
             StreamEvent::Data(id, bytes) => match receiver.on_data(id, &bytes) {
                 Ok(d) => Some(d),
-                Err(e) => {
-                    if let Ok(mut s) = stats.lock() {
-                        s.stream_errors += 1;
-                    }
-                    fail(e);
-                    None
-                }
+                Err(e) => return broken(e),
             },
             StreamEvent::End(id) => {
                 if let Err(e) = receiver.on_stream_end(id) {
-                    if let Ok(mut s) = stats.lock() {
-                        s.stream_errors += 1;
-                    }
-                    fail(e);
+                    return broken(e);
                 }
                 None
             }

@@ -201,3 +201,197 @@ async fn wrong_token_pin_and_version_are_refused_with_the_reason() {
     );
     fx.server.shutdown().await;
 }
+
+/// A raw QUIC connection that pins the fixture's certificate.
+async fn raw_connection(fx: &Fixture, max_streams: u32) -> (quinn::Endpoint, quinn::Connection) {
+    let tls = Pin::Sha256(fx.identity.fingerprint())
+        .client_config()
+        .unwrap();
+    let crypto = quinn::crypto::rustls::QuicClientConfig::try_from(tls).unwrap();
+    let mut config = quinn::ClientConfig::new(Arc::new(crypto));
+    let mut transport = quinn::TransportConfig::default();
+    transport.max_concurrent_uni_streams(max_streams.into());
+    config.transport_config(Arc::new(transport));
+    let endpoint = quinn::Endpoint::client("127.0.0.1:0".parse().unwrap()).unwrap();
+    let conn = endpoint
+        .connect_with(config, fx.addr(), "localhost")
+        .unwrap()
+        .await
+        .unwrap();
+    (endpoint, conn)
+}
+
+fn hello_bytes() -> Vec<u8> {
+    protocol::wire::encode(&protocol::wire::Message::Hello(protocol::wire::Hello {
+        version: protocol::wire::WIRE_VERSION,
+        client_name: "raw".into(),
+        token: TOKEN.into(),
+        codecs: vec![Codec::Raw, Codec::Zstd],
+        max_size: FrameSize::new(8192, 8192),
+        window_modes: vec![],
+        extras: vec![],
+    }))
+    .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_never_reads_does_not_slow_a_healthy_one() {
+    let fx = fixture(StreamBuffer::default_set(Codec::Raw).to_vec()).await;
+    // The stalled client handshakes, then never accepts a frame stream; it
+    // allows the server only 2 concurrent streams, so it stalls at once.
+    let (_endpoint, stalled) = raw_connection(&fx, 2).await;
+    let (mut send, mut recv) = stalled.open_bi().await.unwrap();
+    send.write_all(&hello_bytes()).await.unwrap();
+    let mut buf = vec![0u8; 4096];
+    let n = tokio::time::timeout(Duration::from_secs(5), recv.read(&mut buf))
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(n.is_some(), "the stalled client was welcomed");
+    let mut healthy = client::connect(fx.config()).await.unwrap();
+    let source = fx.start_source();
+    let got = receive_all(&mut healthy).await;
+    // Bound: the healthy client receives at least 90% of the frames (all of
+    // them in practice), while the stalled one has frames dropped for it.
+    assert!(
+        got.len() * 10 >= FRAMES as usize * 9,
+        "healthy client got {} of {FRAMES}",
+        got.len()
+    );
+    assert!(got.windows(2).all(|w| w[0].meta.index < w[1].meta.index));
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let dropped = fx
+        .server
+        .counters
+        .frames_dropped
+        .load(std::sync::atomic::Ordering::Relaxed);
+    // All but the few streams its flow control and our in-flight limit admit.
+    let admitted = 2 + server::serve::MAX_IN_FLIGHT as u64 + 1;
+    assert!(
+        dropped >= FRAMES - admitted,
+        "frames dropped for the stalled client: {dropped}"
+    );
+    source.stop();
+    healthy.close().await;
+    fx.server.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn garbage_from_a_client_closes_only_that_connection() {
+    let fx = fixture(StreamBuffer::default_set(Codec::Zstd).to_vec()).await;
+    let mut healthy = client::connect(fx.config()).await.unwrap();
+    for junk in [
+        vec![0xffu8; 64],                                      // garbage header
+        [&u32::MAX.to_le_bytes()[..], &[1, 0, 1, 0]].concat(), // oversized hello
+        hello_bytes()[..10].to_vec(),                          // truncated hello, then FIN
+    ] {
+        let (endpoint, conn) = raw_connection(&fx, 8).await;
+        let (mut send, _recv) = conn.open_bi().await.unwrap();
+        send.write_all(&junk).await.unwrap();
+        send.finish().unwrap();
+        let reason = tokio::time::timeout(Duration::from_secs(10), conn.closed())
+            .await
+            .unwrap();
+        let text = reason.to_string();
+        assert!(
+            text.contains("bad hello") || text.contains("hello"),
+            "{text}"
+        );
+        endpoint.close(0u32.into(), b"");
+    }
+    // The healthy client was not disturbed.
+    let source = fx.start_source();
+    let got = receive_all(&mut healthy).await;
+    assert_eq!(got.len(), FRAMES as usize);
+    assert!(
+        fx.server
+            .counters
+            .refused
+            .load(std::sync::atomic::Ordering::Relaxed)
+            >= 3
+    );
+    source.stop();
+    healthy.close().await;
+    fx.server.shutdown().await;
+}
+
+/// A hostile or broken server: it welcomes the client, then sends `streams`
+/// as frame streams (each finished, possibly mid-frame).
+async fn fake_server(
+    identity: &Identity,
+    streams: Vec<Vec<u8>>,
+) -> (SocketAddr, tokio::task::JoinHandle<()>) {
+    let endpoint = quinn::Endpoint::server(
+        identity.quic_server_config().unwrap(),
+        "127.0.0.1:0".parse().unwrap(),
+    )
+    .unwrap();
+    let addr = endpoint.local_addr().unwrap();
+    let task = tokio::spawn(async move {
+        let conn = endpoint.accept().await.unwrap().await.unwrap();
+        let (mut send, mut recv) = conn.accept_bi().await.unwrap();
+        let mut buf = vec![0u8; 4096];
+        let _ = recv.read(&mut buf).await;
+        let welcome = protocol::wire::Message::Welcome(protocol::wire::Welcome {
+            session_id: 1,
+            server_name: "fake".into(),
+            size: SIZE,
+            fps: 60.0,
+            buffers: StreamBuffer::default_set(Codec::Raw).to_vec(),
+            window_mode: WindowMode::Off,
+        });
+        send.write_all(&protocol::wire::encode(&welcome).unwrap())
+            .await
+            .unwrap();
+        for bytes in streams {
+            let mut s = conn.open_uni().await.unwrap();
+            s.write_all(&bytes).await.unwrap();
+            s.finish().unwrap();
+        }
+        let _ = tokio::time::timeout(Duration::from_secs(5), conn.closed()).await;
+    });
+    (addr, task)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bad_server_is_reported_and_a_reconnect_gets_the_stream_again() {
+    let frame = tests::render(3, 60.0, DVec3::ZERO, SIZE);
+    let buffers = StreamBuffer::default_set(Codec::Raw);
+    let good = protocol::assemble::encode_frame(&frame, &buffers, 1).unwrap();
+    let mut nan = good.clone();
+    nan.header.meta.camera.pose.position.x = f64::NAN;
+    let whole = good.to_stream_bytes().unwrap();
+    let cases = [
+        (nan.to_stream_bytes().unwrap(), "not finite"),
+        (whole[..whole.len() / 2].to_vec(), "incomplete"),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let identity = Identity::load_or_create(dir.path()).unwrap();
+    for (bytes, expect) in cases {
+        let (addr, task) = fake_server(&identity, vec![bytes]).await;
+        let mut config = ConnectConfig::new(addr, Pin::Sha256(identity.fingerprint()), TOKEN);
+        config.server_name = "localhost".into();
+        let mut session = client::connect(config).await.unwrap();
+        // No frame comes out; the session ends with the reason.
+        let next = tokio::time::timeout(Duration::from_secs(10), session.frames.recv())
+            .await
+            .unwrap();
+        assert!(next.is_none(), "a broken frame must not be delivered");
+        assert_eq!(session.stats().stream_errors, 1);
+        let reason = session.failure().expect("the session reports why it ended");
+        assert!(reason.contains(expect), "{reason}");
+        assert!(
+            session.close_reason().is_some(),
+            "and the connection is closed"
+        );
+        task.abort();
+    }
+    // A reconnect to a working server streams again.
+    let fx = fixture(buffers.to_vec()).await;
+    let mut session = client::connect(fx.config()).await.unwrap();
+    let source = fx.start_source();
+    assert_eq!(receive_all(&mut session).await.len(), FRAMES as usize);
+    source.stop();
+    session.close().await;
+    fx.server.shutdown().await;
+}
