@@ -19,37 +19,40 @@ struct Cli {
     command: Command,
 }
 
+#[derive(clap::Args)]
+struct RecordArgs {
+    /// `builtin:NAME` or a path to a RON scene file.
+    #[arg(default_value = "builtin:default")]
+    scene: String,
+    /// Output directory (must not hold a dump yet); default
+    /// `dumps/SCENE-UNIXTIME`.
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+    /// Frames per second of the recording.
+    #[arg(long, default_value_t = 30.0)]
+    fps: f64,
+    /// Size as WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    size: FrameSize,
+    /// Duration in seconds.
+    #[arg(long, default_value_t = 2.0)]
+    seconds: f64,
+    /// First frame index (time = index / fps).
+    #[arg(long, default_value_t = 0)]
+    start: u64,
+    /// Also write display-encoded PNGs of the color to OUT/png/.
+    #[arg(long)]
+    png: bool,
+    /// Adaptive rendering window (GFFE §4.3): off, keep-density (the
+    /// rendered size grows) or keep-size (lower density).
+    #[arg(long, default_value = "off", value_parser = parse_window)]
+    window: WindowMode,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene into a dump (OpenEXR + JSON per frame).
-    Record {
-        /// `builtin:NAME` or a path to a RON scene file.
-        #[arg(default_value = "builtin:default")]
-        scene: String,
-        /// Output directory (must not hold a dump yet); default
-        /// `dumps/SCENE-UNIXTIME`.
-        #[arg(long, short)]
-        out: Option<PathBuf>,
-        /// Frames per second of the recording.
-        #[arg(long, default_value_t = 30.0)]
-        fps: f64,
-        /// Size as WIDTHxHEIGHT.
-        #[arg(long, default_value = "1280x720", value_parser = parse_size)]
-        size: FrameSize,
-        /// Duration in seconds.
-        #[arg(long, default_value_t = 2.0)]
-        seconds: f64,
-        /// First frame index (time = index / fps).
-        #[arg(long, default_value_t = 0)]
-        start: u64,
-        /// Also write display-encoded PNGs of the color to OUT/png/.
-        #[arg(long)]
-        png: bool,
-        /// Adaptive rendering window (GFFE §4.3): off, keep-density (the
-        /// rendered size grows) or keep-size (lower density).
-        #[arg(long, default_value = "off", value_parser = parse_window)]
-        window: WindowMode,
-    },
+    Record(RecordArgs),
     /// Stream a scene (rendered live) or a dump over QUIC to clients.
     Serve {
         /// `builtin:NAME` or a RON scene file (ignored with --dump).
@@ -133,25 +136,7 @@ fn main() -> anyhow::Result<()> {
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .init();
     match Cli::parse().command {
-        Command::Record {
-            scene,
-            out,
-            fps,
-            size,
-            seconds,
-            start,
-            png,
-            window,
-        } => record(&RecordArgs {
-            out: &out.unwrap_or_else(|| default_out(&scene)),
-            spec: &scene,
-            fps,
-            size,
-            seconds,
-            start,
-            png,
-            window,
-        }),
+        Command::Record(args) => record(&args),
         Command::Info { scene, list } => info(scene.as_deref(), list),
         Command::Serve {
             scene,
@@ -234,28 +219,17 @@ fn progress(len: u64, what: &str) -> ProgressBar {
     ProgressBar::new(len).with_style(style)
 }
 
-struct RecordArgs<'a> {
-    spec: &'a str,
-    out: &'a Path,
-    fps: f64,
-    size: FrameSize,
-    seconds: f64,
-    start: u64,
-    png: bool,
-    window: WindowMode,
-}
-
 fn record(args: &RecordArgs) -> anyhow::Result<()> {
-    let RecordArgs {
-        spec,
-        out,
-        fps,
-        size,
-        seconds,
-        start,
-        png,
-        window,
-    } = *args;
+    let spec = args.scene.as_str();
+    let (fps, size, seconds, start, png, window) = (
+        args.fps,
+        args.size,
+        args.seconds,
+        args.start,
+        args.png,
+        args.window,
+    );
+    let out = &args.out.clone().unwrap_or_else(|| default_out(spec));
     anyhow::ensure!(
         fps.is_finite() && fps > 0.0 && fps <= 1000.0,
         "fps must be in (0, 1000]"

@@ -2,13 +2,6 @@
 // direction, not a point), motion is the rotation-only reprojection of that
 // direction into the previous frame, color is the sky or a flat color.
 
-struct BackgroundOut {
-    @location(0) color: vec4<f32>,
-    @location(1) depth: f32,
-    @location(2) motion: vec2<f32>,
-    @location(3) id: u32,
-};
-
 @vertex
 fn vs_fullscreen(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
     let x = f32((i << 1u) & 2u) * 2.0 - 1.0;
@@ -33,12 +26,12 @@ fn sky(dir: vec3<f32>) -> vec3<f32> {
 }
 
 @fragment
-fn fs_background(@builtin(position) p: vec4<f32>) -> BackgroundOut {
+fn fs_background(@builtin(position) p: vec4<f32>) -> GBufferOut {
     let ndc = vec2<f32>(frame.ray.x + p.x * frame.ray.z, frame.ray.y - p.y * frame.ray.w);
     let ray_view = vec3<f32>(ndc.x * frame.tan_half.x, ndc.y * frame.tan_half.y, -1.0);
     let view_rot = mat3x3<f32>(frame.view_from_camrel[0].xyz, frame.view_from_camrel[1].xyz, frame.view_from_camrel[2].xyz);
     let dir = normalize(transpose(view_rot) * ray_view);
-    var out: BackgroundOut;
+    var out: GBufferOut;
     out.color = vec4<f32>(sky(dir), 1.0);
     out.depth = frame.tan_half.w;
     // w = 0: a point at infinity, which translation does not move.

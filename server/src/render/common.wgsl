@@ -57,6 +57,15 @@ struct ObjectUniforms {
 @group(0) @binding(0) var<uniform> frame: FrameUniforms;
 @group(1) @binding(0) var<uniform> object: ObjectUniforms;
 
+// What the opaque, background and translucent passes write: HDR color,
+// linear view depth, motion current → previous, instance id + 1.
+struct GBufferOut {
+    @location(0) color: vec4<f32>,
+    @location(1) depth: f32,
+    @location(2) motion: vec2<f32>,
+    @location(3) id: u32,
+};
+
 struct VertexIn {
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,

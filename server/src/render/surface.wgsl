@@ -138,13 +138,6 @@ fn shade(camrel: vec3<f32>, normal_in: vec3<f32>, uv: vec2<f32>) -> vec3<f32> {
     return c;
 }
 
-struct GBufferOut {
-    @location(0) color: vec4<f32>,
-    @location(1) depth: f32,
-    @location(2) motion: vec2<f32>,
-    @location(3) id: u32,
-};
-
 // Opaque surfaces: HDR color, linear view depth, motion current → previous.
 @fragment
 fn fs_opaque(in: VsOut) -> GBufferOut {
