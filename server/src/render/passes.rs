@@ -110,131 +110,157 @@ fn gbuffer_targets(blend_color: bool) -> [Option<wgpu::ColorTargetState>; 4] {
     ]
 }
 
-/// Opaque or translucent surfaces (`surface.wgsl`).
+/// What differs between the passes' pipelines; [`build`] does the rest.
+struct PipelineSpec<'a> {
+    label: &'a str,
+    /// The pass's WGSL (appended to `common.wgsl`).
+    source: &'a str,
+    groups: &'a [&'a wgpu::BindGroupLayout],
+    vertex_entry: &'a str,
+    /// Whether the pass reads mesh vertices (the background does not).
+    mesh_vertices: bool,
+    depth: wgpu::DepthStencilState,
+    /// Fragment entry point and color targets; none for depth-only passes.
+    fragment: Option<(&'a str, [Option<wgpu::ColorTargetState>; 4])>,
+}
+
+fn build(device: &wgpu::Device, spec: PipelineSpec<'_>) -> wgpu::RenderPipeline {
+    let shader = module(device, spec.label, spec.source);
+    let groups: Vec<Option<&wgpu::BindGroupLayout>> =
+        spec.groups.iter().map(|g| Some(*g)).collect();
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(spec.label),
+        bind_group_layouts: &groups,
+        immediate_size: 0,
+    });
+    let buffers = [Some(vertex_layout())];
+    let targets;
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(spec.label),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &shader,
+            entry_point: Some(spec.vertex_entry),
+            compilation_options: Default::default(),
+            buffers: if spec.mesh_vertices { &buffers } else { &[] },
+        },
+        // Planes and thin geometry are seen from both sides.
+        primitive: wgpu::PrimitiveState {
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(spec.depth),
+        multisample: Default::default(),
+        fragment: match spec.fragment {
+            Some((entry, t)) => {
+                targets = t;
+                Some(wgpu::FragmentState {
+                    module: &shader,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    targets: &targets,
+                })
+            }
+            None => None,
+        },
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+fn depth(
+    format: wgpu::TextureFormat,
+    write: bool,
+    compare: wgpu::CompareFunction,
+    bias: wgpu::DepthBiasState,
+) -> wgpu::DepthStencilState {
+    wgpu::DepthStencilState {
+        format,
+        depth_write_enabled: Some(write),
+        depth_compare: Some(compare),
+        stencil: Default::default(),
+        bias,
+    }
+}
+
+/// Opaque or translucent surfaces (`surface.wgsl`). Reversed Z: nearer is
+/// greater; translucent surfaces test against the opaque depth but do not
+/// write it.
 pub fn surface(
     device: &wgpu::Device,
     layouts: &Layouts,
     translucent: bool,
 ) -> wgpu::RenderPipeline {
-    let label = if translucent { "translucent" } else { "opaque" };
-    let shader = module(device, label, include_str!("surface.wgsl"));
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[
-            Some(&layouts.frame),
-            Some(&layouts.object),
-            Some(&layouts.shadow),
-        ],
-        immediate_size: 0,
-    });
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &shader,
-            entry_point: Some("vs_surface"),
-            compilation_options: Default::default(),
-            buffers: &[Some(vertex_layout())],
+    build(
+        device,
+        PipelineSpec {
+            label: if translucent { "translucent" } else { "opaque" },
+            source: include_str!("surface.wgsl"),
+            groups: &[&layouts.frame, &layouts.object, &layouts.shadow],
+            vertex_entry: "vs_surface",
+            mesh_vertices: true,
+            depth: depth(
+                DEPTH_FORMAT,
+                !translucent,
+                wgpu::CompareFunction::Greater,
+                Default::default(),
+            ),
+            fragment: Some((
+                if translucent {
+                    "fs_translucent"
+                } else {
+                    "fs_opaque"
+                },
+                gbuffer_targets(translucent),
+            )),
         },
-        primitive: wgpu::PrimitiveState {
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(!translucent),
-            depth_compare: Some(wgpu::CompareFunction::Greater),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &shader,
-            entry_point: Some(if translucent {
-                "fs_translucent"
-            } else {
-                "fs_opaque"
-            }),
-            compilation_options: Default::default(),
-            targets: &gbuffer_targets(translucent),
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    )
 }
 
-/// The background pass (`background.wgsl`).
+/// The background pass (`background.wgsl`): a fullscreen triangle at the
+/// far plane that passes only where no geometry wrote depth.
 pub fn background(device: &wgpu::Device, layouts: &Layouts) -> wgpu::RenderPipeline {
-    let shader = module(device, "background", include_str!("background.wgsl"));
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("background"),
-        bind_group_layouts: &[Some(&layouts.frame)],
-        immediate_size: 0,
-    });
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("background"),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &shader,
-            entry_point: Some("vs_fullscreen"),
-            compilation_options: Default::default(),
-            buffers: &[],
+    build(
+        device,
+        PipelineSpec {
+            label: "background",
+            source: include_str!("background.wgsl"),
+            groups: &[&layouts.frame],
+            vertex_entry: "vs_fullscreen",
+            mesh_vertices: false,
+            depth: depth(
+                DEPTH_FORMAT,
+                false,
+                wgpu::CompareFunction::Equal,
+                Default::default(),
+            ),
+            fragment: Some(("fs_background", gbuffer_targets(false))),
         },
-        primitive: Default::default(),
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(false),
-            depth_compare: Some(wgpu::CompareFunction::Equal),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &shader,
-            entry_point: Some("fs_background"),
-            compilation_options: Default::default(),
-            targets: &gbuffer_targets(false),
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    )
 }
 
-/// The shadow map pass (`shadow.wgsl`).
+/// The shadow map pass (`shadow.wgsl`): depth only, standard Z, with slope
+/// bias against acne.
 pub fn shadow(device: &wgpu::Device, layouts: &Layouts) -> wgpu::RenderPipeline {
-    let shader = module(device, "shadow", include_str!("shadow.wgsl"));
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("shadow"),
-        bind_group_layouts: &[Some(&layouts.frame), Some(&layouts.object)],
-        immediate_size: 0,
-    });
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("shadow"),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &shader,
-            entry_point: Some("vs_shadow"),
-            compilation_options: Default::default(),
-            buffers: &[Some(vertex_layout())],
+    build(
+        device,
+        PipelineSpec {
+            label: "shadow",
+            source: include_str!("shadow.wgsl"),
+            groups: &[&layouts.frame, &layouts.object],
+            vertex_entry: "vs_shadow",
+            mesh_vertices: true,
+            depth: depth(
+                SHADOW_FORMAT,
+                true,
+                wgpu::CompareFunction::Less,
+                wgpu::DepthBiasState {
+                    constant: 2,
+                    slope_scale: 2.0,
+                    clamp: 0.0,
+                },
+            ),
+            fragment: None,
         },
-        primitive: wgpu::PrimitiveState {
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: SHADOW_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: wgpu::DepthBiasState {
-                constant: 2,
-                slope_scale: 2.0,
-                clamp: 0.0,
-            },
-        }),
-        multisample: Default::default(),
-        fragment: None,
-        multiview_mask: None,
-        cache: None,
-    })
+    )
 }
