@@ -10,7 +10,7 @@ use protocol::dump::{DumpWriter, Manifest};
 use protocol::wire::WindowMode;
 use server::render::{Renderer, WindowSettings, plan};
 use server::scene::{Scene, builtin};
-use server::source::{Source, SourceSpec};
+use server::source::{Feed, Source, SourceSpec};
 
 #[derive(Parser)]
 #[command(version, about = "Frame-generation streaming server")]
@@ -328,14 +328,24 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         buffers: buffers.clone(),
         window_mode: args.window,
     };
-    let frames = Source::channel();
-    let server = server::serve::Server::start(
-        args.listen,
-        identity.quic_server_config()?,
-        policy,
-        frames.clone(),
-    )?;
-    let source = Source::start(args.source, buffers, frames)?;
+    // A dump replay without --loop starts afresh for every client; a scene
+    // (or a looping dump) is one live stream that clients join.
+    let per_session = matches!(args.source, SourceSpec::Dump { looped: false, .. });
+    let (feed, source) = if per_session {
+        (
+            Feed::PerSession {
+                spec: args.source,
+                buffers,
+            },
+            None,
+        )
+    } else {
+        let frames = Source::channel();
+        let source = Source::start(args.source, buffers, frames.clone())?;
+        (Feed::Live(frames), Some(source))
+    };
+    let server =
+        server::serve::Server::start(args.listen, identity.quic_server_config()?, policy, feed)?;
     println!("listening on {}", server.local_addr()?);
     println!("certificate SHA-256: {}", identity.fingerprint());
     println!("token: {token}");
@@ -346,14 +356,12 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     );
     tokio::signal::ctrl_c().await?;
     println!("shutting down");
-    let produced = source
-        .stats
-        .produced
-        .load(std::sync::atomic::Ordering::Relaxed);
-    let skipped = source
-        .stats
-        .skipped
-        .load(std::sync::atomic::Ordering::Relaxed);
+    let load = |f: fn(&server::source::SourceStats) -> &std::sync::atomic::AtomicU64| {
+        source.as_ref().map_or(0, |s| {
+            f(&s.stats).load(std::sync::atomic::Ordering::Relaxed)
+        })
+    };
+    let (produced, skipped) = (load(|s| &s.produced), load(|s| &s.skipped));
     let c = &server.counters;
     println!(
         "frames produced {produced}, skipped by the pacer {skipped}; sessions {}, refused {}, frames sent {}, dropped for slow clients {}",
@@ -363,7 +371,9 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         c.frames_dropped.load(std::sync::atomic::Ordering::Relaxed),
     );
     server.shutdown().await;
-    source.stop();
+    if let Some(source) = source {
+        source.stop();
+    }
     Ok(())
 }
 

@@ -18,7 +18,7 @@ use protocol::wire::{self, Decoder, Hello, Message, Pong, ServerStats};
 use tokio::sync::{Semaphore, broadcast};
 
 use crate::session::{self, Policy};
-use crate::source::StreamFrame;
+use crate::source::Feed;
 
 /// Most frame streams one client may have open at once.
 pub const MAX_IN_FLIGHT: usize = 3;
@@ -70,20 +70,20 @@ pub struct Server {
 }
 
 impl Server {
-    /// Binds `addr` and serves frames from `frames` to every client that
+    /// Binds `addr` and serves frames from `feed` to every client that
     /// passes `policy`.
     pub fn start(
         addr: SocketAddr,
         config: quinn::ServerConfig,
         policy: Policy,
-        frames: broadcast::Sender<Arc<StreamFrame>>,
+        feed: Feed,
     ) -> std::io::Result<Self> {
         let endpoint = quinn::Endpoint::server(config, addr)?;
         let counters = Arc::new(ServerCounters::default());
         let accept = tokio::spawn(accept_loop(
             endpoint.clone(),
             Arc::new(policy),
-            frames,
+            feed,
             counters.clone(),
         ));
         Ok(Self {
@@ -110,17 +110,17 @@ impl Server {
 async fn accept_loop(
     endpoint: quinn::Endpoint,
     policy: Arc<Policy>,
-    frames: broadcast::Sender<Arc<StreamFrame>>,
+    feed: Feed,
     counters: Arc<ServerCounters>,
 ) {
     let mut next_session = 1u64;
     while let Some(incoming) = endpoint.accept().await {
-        let (policy, frames, counters) = (policy.clone(), frames.clone(), counters.clone());
+        let (policy, feed, counters) = (policy.clone(), feed.clone(), counters.clone());
         let session_id = next_session;
         next_session += 1;
         tokio::spawn(async move {
             let peer = incoming.remote_address();
-            match connection(incoming, &policy, session_id, &frames, &counters).await {
+            match connection(incoming, &policy, session_id, &feed, &counters).await {
                 Ok(()) => tracing::info!(session_id, %peer, "session ended"),
                 Err(e) => tracing::warn!(session_id, %peer, "session failed: {e:#}"),
             }
@@ -148,7 +148,7 @@ async fn connection(
     incoming: quinn::Incoming,
     policy: &Policy,
     session_id: u64,
-    frames: &broadcast::Sender<Arc<StreamFrame>>,
+    feed: &Feed,
     counters: &ServerCounters,
 ) -> anyhow::Result<()> {
     let conn = incoming.await?;
@@ -210,7 +210,9 @@ async fn connection(
     };
     counters.sessions.fetch_add(1, Ordering::Relaxed);
     tracing::info!(session_id, client = %hello.client_name, "session started");
-    let mut rx = frames.subscribe();
+    // Subscribed before the welcome, so a live stream loses nothing after
+    // it; a per-session source starts here and stops with the session.
+    let (mut rx, _source) = feed.subscribe()?;
     send.write_all(&wire::encode(&Message::Welcome(welcome))?)
         .await?;
 
@@ -240,6 +242,12 @@ async fn connection(
                 continue;
             }
             Err(broadcast::error::RecvError::Closed) => {
+                // A finite source ended: let the frames in flight arrive
+                // (each permit is held until its stream is acknowledged),
+                // then close.
+                let all = MAX_IN_FLIGHT as u32;
+                let _ =
+                    tokio::time::timeout(Duration::from_secs(10), permits.acquire_many(all)).await;
                 conn.close(close_code::DONE.into(), b"end of stream");
                 break Ok(());
             }
@@ -258,6 +266,9 @@ async fn connection(
                 let mut stream = conn.open_uni().await?;
                 stream.write_all(&frame.bytes).await?;
                 stream.finish()?;
+                // Hold the in-flight slot until the client has acknowledged
+                // the whole frame (or stopped the stream).
+                let _ = stream.stopped().await;
                 anyhow::Ok(())
             };
             match sent.await {

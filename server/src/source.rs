@@ -2,6 +2,10 @@
 //! its own, paced by simulation time ([`crate::pacer`]), encoded once and
 //! shared by every client through a broadcast channel. A client that lags
 //! loses the oldest frames (counted as drops) and never slows the producer.
+//!
+//! A live scene is rendered once and shared by all sessions ([`Feed::Live`]);
+//! a dump replay can instead start afresh for every session, from its first
+//! frame ([`Feed::PerSession`]).
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -65,12 +69,43 @@ pub struct SourceStats {
 
 /// A running producer thread.
 pub struct Source {
-    /// Subscribe here to receive frames.
-    pub frames: broadcast::Sender<Arc<StreamFrame>>,
     /// Counters.
     pub stats: Arc<SourceStats>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// Where a session's frames come from.
+#[derive(Clone, Debug)]
+pub enum Feed {
+    /// One shared live stream: sessions join it where it is.
+    Live(broadcast::Sender<Arc<StreamFrame>>),
+    /// A fresh source per session (dump replays): every client gets the
+    /// whole sequence, and its session ends after the last frame.
+    PerSession {
+        /// What to replay.
+        spec: SourceSpec,
+        /// The buffers to encode.
+        buffers: Vec<StreamBuffer>,
+    },
+}
+
+impl Feed {
+    /// A receiver for one session, and the source it owns (per-session
+    /// feeds), which stops when dropped.
+    pub fn subscribe(
+        &self,
+    ) -> anyhow::Result<(broadcast::Receiver<Arc<StreamFrame>>, Option<Source>)> {
+        match self {
+            Feed::Live(tx) => Ok((tx.subscribe(), None)),
+            Feed::PerSession { spec, buffers } => {
+                let tx = Source::channel();
+                let rx = tx.subscribe();
+                let source = Source::start(spec.clone(), buffers.clone(), tx)?;
+                Ok((rx, Some(source)))
+            }
+        }
+    }
 }
 
 /// How many frames a lagging client may be behind before it loses the
@@ -94,7 +129,9 @@ impl Source {
         let stop = Arc::new(AtomicBool::new(false));
         let mut producer = Producer::open(&spec)?;
         let thread = {
-            let (frames, stats, stop) = (frames.clone(), stats.clone(), stop.clone());
+            // The thread owns its sender: when a finite source ends and the
+            // caller holds no other, subscribers see the channel close.
+            let (stats, stop) = (stats.clone(), stop.clone());
             std::thread::Builder::new()
                 .name("frame source".into())
                 .spawn(move || {
@@ -104,7 +141,6 @@ impl Source {
                 })?
         };
         Ok(Self {
-            frames,
             stats,
             stop,
             thread: Some(thread),

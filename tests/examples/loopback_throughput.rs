@@ -16,7 +16,7 @@ use server::render::Renderer;
 use server::scene::Scene;
 use server::serve::Server;
 use server::session::Policy;
-use server::source::{Source, StreamFrame};
+use server::source::{Feed, Source, StreamFrame};
 use server::tls::Identity;
 
 const SIZE: FrameSize = FrameSize::new(1280, 720);
@@ -68,7 +68,7 @@ async fn main() -> anyhow::Result<()> {
             "127.0.0.1:0".parse()?,
             identity.quic_server_config()?,
             policy,
-            tx.clone(),
+            Feed::Live(tx.clone()),
         )?;
         let mut session = client::connect(ConnectConfig::new(
             server.local_addr()?,

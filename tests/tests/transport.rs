@@ -13,7 +13,7 @@ use protocol::wire::{RejectReason, StreamBuffer, WindowMode};
 use protocol::{Codec, Frame, FrameSize};
 use server::serve::Server;
 use server::session::Policy;
-use server::source::{Source, SourceSpec, StreamFrame};
+use server::source::{Feed, Source, SourceSpec, StreamFrame};
 use server::tls::Identity;
 use tokio::sync::broadcast;
 
@@ -58,7 +58,7 @@ async fn fixture(buffers: Vec<StreamBuffer>) -> Fixture {
         "127.0.0.1:0".parse().unwrap(),
         identity.quic_server_config().unwrap(),
         policy,
-        frames.clone(),
+        Feed::Live(frames.clone()),
     )
     .unwrap();
     Fixture {
@@ -393,5 +393,55 @@ async fn a_bad_server_is_reported_and_a_reconnect_gets_the_stream_again() {
     assert_eq!(receive_all(&mut session).await.len(), FRAMES as usize);
     source.stop();
     session.close().await;
+    fx.server.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dump_replays_from_the_start_for_every_session() {
+    let fx = fixture(StreamBuffer::default_set(Codec::Zstd).to_vec()).await;
+    let policy = Policy {
+        token: TOKEN.into(),
+        server_name: "replay".into(),
+        size: SIZE,
+        max_frame: SIZE,
+        fps: 60.0,
+        buffers: fx.buffers.clone(),
+        window_mode: WindowMode::Off,
+    };
+    let feed = Feed::PerSession {
+        spec: SourceSpec::Dump {
+            dir: fx.dump.clone(),
+            looped: false,
+        },
+        buffers: fx.buffers.clone(),
+    };
+    let replay = Server::start(
+        "127.0.0.1:0".parse().unwrap(),
+        fx.identity.quic_server_config().unwrap(),
+        policy,
+        feed,
+    )
+    .unwrap();
+    let mut config = fx.config();
+    config.addr = replay.local_addr().unwrap();
+    let originals: Vec<Frame> = DumpReader::open(&fx.dump)
+        .unwrap()
+        .frames()
+        .map(Result::unwrap)
+        .collect();
+    // Two clients, one after the other: each gets the whole dump from frame 0.
+    for _ in 0..2 {
+        let mut s = client::connect(config.clone()).await.unwrap();
+        let got = receive_all(&mut s).await;
+        assert_eq!(got.len(), originals.len());
+        assert!(got.iter().zip(&originals).all(|(g, w)| same_frame(g, w)));
+        // The session ends after the last frame.
+        let end = tokio::time::timeout(Duration::from_secs(10), s.frames.recv())
+            .await
+            .unwrap();
+        assert!(end.is_none(), "no frame after the end of the dump");
+        s.close().await;
+    }
+    replay.shutdown().await;
     fx.server.shutdown().await;
 }
