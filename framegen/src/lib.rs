@@ -1,17 +1,59 @@
-//! Frame generation for the streaming client: the methods (repeat,
-//! reprojection, GFFE extrapolation, GeoMotionGen interpolation) arrive in
-//! their own modules; this crate already owns what every method is measured
-//! by.
+//! Frame generation for the streaming client (DESIGN §4–§6): rendered
+//! frames go in one by one, generated frames at any α come out.
 //!
-//! * [`display`]: the one fixed display transform of DESIGN §9 (exposure 1,
-//!   Reinhard per channel, sRGB OETF, clamp), from `protocol`.
-//! * [`metrics`]: PSNR and SSIM on display-encoded images.
+//! * [`FrameGenerator`] is the one API for every [`Method`]: `repeat`,
+//!   `reproject` (camera-only, with depth) and `gffe` (G-buffer-free frame
+//!   extrapolation, seed 000), on the CPU reference or on wgpu.
+//! * Each GFFE pass is a module in [`gffe`] with its WGSL shader beside it
+//!   and a plain CPU reference of the same computation.
+//! * [`display`] and [`metrics`] are what every method is measured by.
 
+pub mod camera;
+pub mod cpu;
+pub mod generator;
+pub mod gffe;
+pub mod gpu;
+pub mod input;
+pub mod levels;
 pub mod metrics;
+pub mod output;
+pub mod settings;
+pub mod splat;
 
 /// The fixed display transform lives in `protocol` (it is part of the data
 /// contract); re-exported here for the metrics' users.
 pub use protocol::display;
 
 pub use display::{DisplayImage, display_encode};
+pub use generator::{
+    Backend, CameraSource, FrameGenerator, Generated, Pass, PassTime, PixelSource, PushOutcome,
+};
+pub use gpu::GpuContext;
 pub use metrics::{MetricsError, psnr, ssim};
+pub use settings::{Method, Settings};
+
+/// Everything that can go wrong in frame generation.
+#[derive(Debug, thiserror::Error)]
+pub enum FramegenError {
+    /// No GPU adapter could be opened.
+    #[error("no GPU adapter: {0}")]
+    NoAdapter(String),
+    /// The device failed or was lost.
+    #[error("GPU device error: {0}")]
+    Device(String),
+    /// The settings are out of range.
+    #[error("invalid settings: {0}")]
+    Settings(String),
+    /// The frame's buffers do not match its metadata.
+    #[error("invalid frame: {0}")]
+    Frame(#[from] protocol::ValidationError),
+    /// A frame was asked for before any rendered frame arrived.
+    #[error("no rendered frame yet")]
+    NoFrame,
+    /// α must be finite, ≥ 0 and at most the configured limit.
+    #[error("α = {0} is outside [0, {1}]")]
+    Alpha(f64, f64),
+    /// A camera given for the generated frame is invalid.
+    #[error("invalid target camera: {0}")]
+    Camera(protocol::ValidationError),
+}

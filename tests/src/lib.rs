@@ -90,3 +90,40 @@ pub fn render(index: u64, fps: f64, origin: DVec3, size: FrameSize) -> Frame {
         extras: vec![],
     }
 }
+
+/// Frames of a built-in scene rendered by the server's wgpu renderer (real
+/// rasterised color, depth and motion), the test data of the framegen
+/// tests. `indices` are frame numbers at `fps`.
+pub fn render_scene(
+    name: &str,
+    size: FrameSize,
+    fps: f64,
+    indices: impl IntoIterator<Item = u64>,
+) -> Vec<Frame> {
+    let scene = server::scene::Scene::load(&format!("builtin:{name}"))
+        .unwrap_or_else(|e| panic!("scene {name}: {e}"));
+    let mut renderer = server::render::Renderer::new(scene, size, std::path::Path::new("."))
+        .unwrap_or_else(|e| panic!("renderer for {name}: {e}"));
+    indices
+        .into_iter()
+        .map(|i| {
+            renderer
+                .render(i, fps)
+                .unwrap_or_else(|e| panic!("render {name} frame {i}: {e}"))
+        })
+        .collect()
+}
+
+/// The hard-case built-in scenes (DESIGN §10), one per challenge.
+pub const HARD_CASES: [&str; 10] = [
+    "pan",
+    "dolly",
+    "crossing",
+    "moving_light",
+    "sky",
+    "thin",
+    "fast_rotation",
+    "translucent",
+    "cut",
+    "huge",
+];

@@ -1,0 +1,181 @@
+//! The camera model every pass shares, in `f32` and camera-relative
+//! coordinates (DESIGN §3, precision). Mirrors `gpu/common.wgsl` operation
+//! by operation so the CPU reference and the shaders agree to rounding.
+//!
+//! Per-pixel positions are stored relative to a *reference origin*: the
+//! centre of the camera of the current rendered frame. A camera is described
+//! by its rotation columns and its centre relative to that origin; the
+//! difference of two world positions is taken in `f64` before it is rounded,
+//! so a world at 1e7 keeps its precision near the camera.
+//!
+//! A position is a `[f32; 4]` whose `w` says what it is: [`W_POINT`] a point,
+//! [`W_DIRECTION`] a unit direction (sky, `+inf` depth, moved only by
+//! rotation), [`W_INVALID`] nothing.
+
+use glam::{DVec3, Vec2, Vec3, Vec4};
+use protocol::{Camera, FrameSize};
+
+/// `w` of a finite position.
+pub const W_POINT: f32 = 1.0;
+/// `w` of a direction (a point at infinity).
+pub const W_DIRECTION: f32 = 0.0;
+/// `w` of an empty slot.
+pub const W_INVALID: f32 = -1.0;
+
+/// A camera as seen by a pass; the layout of WGSL's `Cam`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct PassCamera {
+    /// World-from-view rotation columns (w unused).
+    pub col0: [f32; 4],
+    /// Second column.
+    pub col1: [f32; 4],
+    /// Third column (the camera's +Z, i.e. minus the view direction).
+    pub col2: [f32; 4],
+    /// Camera centre relative to the reference origin.
+    pub eye: [f32; 4],
+    /// `tan(fov_y/2)·aspect`, `tan(fov_y/2)`, 0, 0.
+    pub proj: [f32; 4],
+    /// Window `u0`, `v1`, width, height in base NDC.
+    pub window: [f32; 4],
+    /// Image width and height in pixels, 0, 0.
+    pub size: [f32; 4],
+}
+
+/// A projected point (see [`PassCamera::project`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Proj {
+    /// Continuous pixel position.
+    pub pixel: Vec2,
+    /// Linear view depth, `+inf` for directions.
+    pub depth: f32,
+}
+
+impl PassCamera {
+    /// `camera` seen from the reference origin `origin` (world space), for
+    /// an image of `size` pixels.
+    pub fn new(camera: &Camera, size: FrameSize, origin: DVec3) -> Self {
+        let r = camera.pose.rotation.normalize();
+        let col = |v: DVec3| {
+            let v = (r * v).as_vec3();
+            [v.x, v.y, v.z, 0.0]
+        };
+        let eye = (camera.pose.position - origin).as_vec3();
+        let t = camera.projection.tan_half_fov();
+        let w = &camera.window;
+        Self {
+            col0: col(DVec3::X),
+            col1: col(DVec3::Y),
+            col2: col(DVec3::Z),
+            eye: [eye.x, eye.y, eye.z, 0.0],
+            proj: [(t * camera.projection.aspect) as f32, t as f32, 0.0, 0.0],
+            window: [
+                w.u0 as f32,
+                w.v1 as f32,
+                w.width() as f32,
+                w.height() as f32,
+            ],
+            size: [size.width as f32, size.height as f32, 0.0, 0.0],
+        }
+    }
+
+    fn c(&self, i: usize) -> Vec3 {
+        let c = [self.col0, self.col1, self.col2][i];
+        Vec3::new(c[0], c[1], c[2])
+    }
+
+    /// Image width in pixels.
+    pub fn width(&self) -> u32 {
+        self.size[0] as u32
+    }
+
+    /// Image height in pixels.
+    pub fn height(&self) -> u32 {
+        self.size[1] as u32
+    }
+
+    /// The position (or direction for `depth = +inf`) seen through the
+    /// continuous pixel position `px` at linear depth `depth` (> 0).
+    pub fn unproject(&self, px: Vec2, depth: f32) -> [f32; 4] {
+        let ndc_x = self.window[0] + px.x / self.size[0] * self.window[2];
+        let ndc_y = self.window[1] - px.y / self.size[1] * self.window[3];
+        let ray = Vec3::new(ndc_x * self.proj[0], ndc_y * self.proj[1], -1.0);
+        let world = self.c(0) * ray.x + self.c(1) * ray.y + self.c(2) * ray.z;
+        if depth == f32::INFINITY {
+            let d = world.normalize();
+            return [d.x, d.y, d.z, W_DIRECTION];
+        }
+        let p = Vec3::new(self.eye[0], self.eye[1], self.eye[2]) + world * depth;
+        [p.x, p.y, p.z, W_POINT]
+    }
+
+    /// Projects a position or direction; `None` behind the camera, for
+    /// invalid input, or for non-finite / absurdly far image positions.
+    pub fn project(&self, p: [f32; 4]) -> Option<Proj> {
+        if p[3] < 0.0 {
+            return None;
+        }
+        let mut rel = Vec3::new(p[0], p[1], p[2]);
+        if p[3] > 0.5 {
+            rel -= Vec3::new(self.eye[0], self.eye[1], self.eye[2]);
+        }
+        let v = Vec3::new(self.c(0).dot(rel), self.c(1).dot(rel), self.c(2).dot(rel));
+        let z = -v.z;
+        if z.is_nan() || z <= 0.0 {
+            return None;
+        }
+        let ndc_x = v.x / (z * self.proj[0]);
+        let ndc_y = v.y / (z * self.proj[1]);
+        let px = (ndc_x - self.window[0]) / self.window[2] * self.size[0];
+        let py = (self.window[1] - ndc_y) / self.window[3] * self.size[1];
+        let ok = px.abs() < 1e30 && py.abs() < 1e30;
+        ok.then(|| Proj {
+            pixel: Vec2::new(px, py),
+            depth: if p[3] > 0.5 { z } else { f32::INFINITY },
+        })
+    }
+
+    /// Linear view depth of a stored position (`+inf` for directions, NaN
+    /// for invalid slots, which every comparison then rejects).
+    pub fn depth_of(&self, p: [f32; 4]) -> f32 {
+        if p[3] < 0.0 {
+            return f32::NAN;
+        }
+        if p[3] < 0.5 {
+            return f32::INFINITY;
+        }
+        let rel = Vec3::new(p[0], p[1], p[2]) - Vec3::new(self.eye[0], self.eye[1], self.eye[2]);
+        -self.c(2).dot(rel)
+    }
+}
+
+/// Centre of pixel `i` of a `width`-wide image.
+pub fn pixel_center(i: usize, width: u32) -> Vec2 {
+    let w = width as usize;
+    Vec2::new((i % w) as f32 + 0.5, (i / w) as f32 + 0.5)
+}
+
+/// Linear index of the cell containing `px` in a `w`×`h` grid whose cells are
+/// `scale` pixels wide; `None` outside. WGSL `cell`.
+pub fn cell(px: Vec2, w: u32, h: u32, scale: f32) -> Option<u32> {
+    let q = px / scale;
+    if !(q.x >= 0.0 && q.y >= 0.0 && q.x < w as f32 && q.y < h as f32) {
+        return None;
+    }
+    Some(q.y as u32 * w + q.x as u32)
+}
+
+/// Moves a stored position from one reference origin to another: `shift` is
+/// the old origin relative to the new one. Directions do not move.
+pub fn rebase(p: [f32; 4], shift: Vec3) -> [f32; 4] {
+    if p[3] > 0.5 {
+        [p[0] + shift.x, p[1] + shift.y, p[2] + shift.z, p[3]]
+    } else {
+        p
+    }
+}
+
+/// `[f32; 4]` as a glam vector.
+pub fn v4(p: [f32; 4]) -> Vec4 {
+    Vec4::from_array(p)
+}

@@ -1,0 +1,165 @@
+//! The CPU reference backend: the passes' plain Rust references, run in
+//! order. Slow, simple, and the yardstick the wgpu backend is tested
+//! against.
+
+use std::time::Instant;
+
+use crate::FramegenError;
+use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime};
+use crate::gffe::{background, bgfill, history, holes, motion, warp, window};
+use crate::input::Prepared;
+use crate::levels::Levels;
+use crate::output::Output;
+use crate::settings::Method;
+use crate::splat;
+
+/// One ingested frame.
+#[derive(Clone, Debug)]
+struct FrameState {
+    camera: crate::camera::PassCamera,
+    frame: Prepared,
+    history: history::History,
+    k: u32,
+    levels: Levels,
+    background: Vec<background::Texel>,
+}
+
+/// The CPU reference backend.
+#[derive(Debug, Default)]
+pub struct CpuBackend {
+    current: Option<FrameState>,
+    timings: Vec<PassTime>,
+}
+
+fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let out = f();
+    timings.push(PassTime {
+        pass,
+        time: start.elapsed(),
+    });
+    out
+}
+
+impl Backend for CpuBackend {
+    fn ingest(&mut self, frame: &Prepared, plan: &IngestPlan) -> Result<u32, FramegenError> {
+        self.timings.clear();
+        let t = &mut self.timings;
+        let prev = if plan.prev.is_some() {
+            self.current.take()
+        } else {
+            None
+        };
+        let prev_history = prev.as_ref().zip(plan.prev).and_then(|(p, camera)| {
+            (p.k == plan.k).then_some(history::PrevHistory {
+                camera,
+                positions: &p.history.positions,
+                track: &p.history.track,
+            })
+        });
+        let hist = timed(t, Pass::History, || {
+            history::track(
+                &plan.camera,
+                &frame.depth,
+                &frame.motion,
+                prev_history,
+                plan.k,
+                plan.epsilon,
+            )
+        });
+        let n = frame.depth.len();
+        let prev_bg = prev
+            .as_ref()
+            .zip(plan.prev)
+            .map(|(p, camera)| background::PrevBackground {
+                camera,
+                levels: p.levels,
+                texels: &p.background,
+            });
+        let bg = timed(t, Pass::Background, || {
+            background::collect(
+                &plan.camera,
+                &hist.positions[..n],
+                &hist.track,
+                &frame.color,
+                plan.levels,
+                prev_bg,
+                plan.tolerance,
+            )
+        });
+        let dynamic = hist.dynamic;
+        self.current = Some(FrameState {
+            camera: plan.camera,
+            frame: frame.clone(),
+            history: hist,
+            k: plan.k,
+            levels: plan.levels,
+            background: bg,
+        });
+        Ok(dynamic)
+    }
+
+    fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let t = &mut self.timings;
+        t.retain(|p| matches!(p.pass, Pass::History | Pass::Background));
+        if job.method == Method::Repeat {
+            let mut out = timed(t, Pass::Crop, || {
+                window::crop(
+                    &cur.frame.color,
+                    &cur.frame.depth,
+                    &cur.frame.motion,
+                    &job.crop,
+                )
+            });
+            out.motion.iter_mut().for_each(|m| *m = [0.0; 2]);
+            return Ok(out);
+        }
+        let next = timed(t, Pass::Motion, || {
+            motion::estimate(&cur.history.positions, &cur.history.track, cur.k, job.alpha)
+        });
+        let mut out = timed(t, Pass::Warp, || {
+            let cands = warp::project(&next, &job.target);
+            let winners =
+                splat::resolve(&cands, (job.target.width() * job.target.height()) as usize);
+            let mut out = Output::empty(job.target.width(), job.target.height());
+            warp::resolve(
+                &winners,
+                &cur.frame.color,
+                cur.camera.width(),
+                job.map,
+                &mut out,
+            );
+            out
+        });
+        if cur.levels.count > 0 && job.bg_target.count == cur.levels.count {
+            timed(t, Pass::BgFill, || {
+                let cands =
+                    bgfill::project(&cur.background, cur.levels, &job.target, job.bg_target);
+                let winners = splat::resolve(&cands, job.bg_target.total() as usize);
+                bgfill::resolve(
+                    &winners,
+                    &cur.background,
+                    job.bg_target,
+                    &cur.camera,
+                    job.map,
+                    &mut out,
+                );
+            });
+        }
+        timed(t, Pass::Holes, || holes::fill(&mut out, job.pushpull));
+        Ok(out)
+    }
+
+    fn reset(&mut self) {
+        self.current = None;
+    }
+
+    fn timings(&self) -> Vec<PassTime> {
+        self.timings.clone()
+    }
+
+    fn name(&self) -> String {
+        "cpu".into()
+    }
+}

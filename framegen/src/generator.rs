@@ -1,0 +1,539 @@
+//! The frame generator: one API over every method and both backends.
+//!
+//! Fed rendered frames with [`FrameGenerator::push`], asked for generated
+//! frames with [`FrameGenerator::generate`] at any α ≥ 0 (α = 1 is one
+//! render interval after the last rendered frame). The generator owns what
+//! is the same for every backend: input sanitising, cut and duplicate
+//! detection, the camera of the generated frame (GFFE eq. 2 or a pose the
+//! caller knows), the displayed region of a widened window, and turning the
+//! passes' output into a [`Frame`] plus a per-pixel [`PixelSource`] mask.
+//! The passes themselves run on a [`Backend`]: the CPU reference
+//! ([`crate::cpu::CpuBackend`]) or wgpu ([`crate::gpu::GpuBackend`]).
+//!
+//! A seam for GFFE's shading correction (§4.4) is left after the passes:
+//! it takes the generated color, depth and mask, which [`Generated`]
+//! carries.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use glam::Vec2;
+use half::f16;
+use protocol::{Camera, Frame, FrameMeta, FrameSize, Limits, Pose, Window};
+
+use crate::FramegenError;
+use crate::camera::PassCamera;
+use crate::gffe::window::Crop;
+use crate::gpu::GpuContext;
+use crate::input::{Prepared, Sanitized, prepare};
+use crate::levels::Levels;
+use crate::output::{self, DisplayMap, Output};
+use crate::settings::{Method, Settings};
+
+/// A pass, for timings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Pass {
+    /// Sanitising and (GPU) uploading the rendered frame.
+    Upload,
+    /// History tracking (GFFE Alg. 1).
+    History,
+    /// Background collection (GFFE §4.2).
+    Background,
+    /// Position estimation (eq. 1).
+    Motion,
+    /// Forward warp: project, splat, resolve.
+    Warp,
+    /// Background projection into holes.
+    BgFill,
+    /// Push-pull hole fill.
+    Holes,
+    /// Window crop (repeat).
+    Crop,
+    /// (GPU) reading the generated frame back.
+    Readback,
+}
+
+impl Pass {
+    /// Name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Pass::Upload => "upload",
+            Pass::History => "history",
+            Pass::Background => "background",
+            Pass::Motion => "motion",
+            Pass::Warp => "warp",
+            Pass::BgFill => "bgfill",
+            Pass::Holes => "holes",
+            Pass::Crop => "crop",
+            Pass::Readback => "readback",
+        }
+    }
+}
+
+/// Wall time of one pass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PassTime {
+    /// The pass.
+    pub pass: Pass,
+    /// How long it took (GPU: submit + wait, only when profiling).
+    pub time: Duration,
+}
+
+/// Where a generated pixel came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum PixelSource {
+    /// Forward-warped from the rendered frame.
+    Warped = 1,
+    /// From the background layers.
+    Background = 2,
+    /// Push-pull filled (no source had it).
+    Filled = 3,
+    /// Copied from the rendered frame (repeat).
+    Copied = 4,
+}
+
+impl PixelSource {
+    fn from_mask(m: u32) -> Self {
+        match m {
+            output::WARPED => PixelSource::Warped,
+            output::BACKGROUND => PixelSource::Background,
+            output::COPIED => PixelSource::Copied,
+            _ => PixelSource::Filled,
+        }
+    }
+}
+
+/// Where the camera of a generated frame comes from (DESIGN §4 step 3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CameraSource {
+    /// GFFE eq. 2 from the last two rendered cameras.
+    Extrapolated,
+    /// A pose the caller knows (e.g. the viewer's own input).
+    Given(Pose),
+}
+
+/// A generated frame.
+#[derive(Clone, Debug)]
+pub struct Generated {
+    /// Color, depth and motion like a rendered frame (GFFE §7.1). The
+    /// meta carries the source frame's index, time `t + α·Δ`, the
+    /// generated camera (plain window) and the displayed size. Motion
+    /// points to the source rendered frame's displayed region.
+    pub frame: Frame,
+    /// The α it was generated at.
+    pub alpha: f64,
+    /// Per pixel, where it came from.
+    pub mask: Vec<PixelSource>,
+    /// The same buffers in `f32`, as the passes left them.
+    pub output: Output,
+}
+
+impl Generated {
+    /// Number of pixels from `source`.
+    pub fn count(&self, source: PixelSource) -> usize {
+        self.mask.iter().filter(|&&m| m == source).count()
+    }
+}
+
+/// What [`FrameGenerator::push`] did with a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PushOutcome {
+    /// Taken, continuing the history.
+    Continued {
+        /// Pixels that failed the static test.
+        dynamic: u32,
+    },
+    /// Taken after a reset (first frame, cut flag, size or projection
+    /// change, time going backwards, or a detected cut).
+    Restarted {
+        /// Why.
+        reason: &'static str,
+    },
+    /// The same frame again (same time and camera): ignored.
+    Duplicate,
+}
+
+/// What a backend is asked to do with a rendered frame.
+#[derive(Clone, Copy, Debug)]
+pub struct IngestPlan {
+    /// `C_t`, centre at the origin.
+    pub camera: PassCamera,
+    /// `C_{t−1}` relative to `C_t`'s centre; `None` restarts the history.
+    pub prev: Option<PassCamera>,
+    /// History length (1 = none).
+    pub k: u32,
+    /// Static-test threshold.
+    pub epsilon: f32,
+    /// Background layout (count 0 = none).
+    pub levels: Levels,
+    /// Case-2 depth margin.
+    pub tolerance: f32,
+}
+
+/// One generated frame to make.
+#[derive(Clone, Copy, Debug)]
+pub struct Job {
+    /// The method.
+    pub method: Method,
+    /// The generated frame's camera relative to `C_t`'s centre, at the
+    /// displayed size.
+    pub target: PassCamera,
+    /// `C_t` (for background motion vectors).
+    pub current: PassCamera,
+    /// α.
+    pub alpha: f32,
+    /// History length in use.
+    pub k: u32,
+    /// Rendered pixels → displayed pixels of `C_t`.
+    pub map: DisplayMap,
+    /// The background splat layout over the generated frame.
+    pub bg_target: Levels,
+    /// The rendered frame's background layout.
+    pub bg_source: Levels,
+    /// Push-pull levels.
+    pub pushpull: u32,
+    /// The displayed region of the rendered frame (repeat).
+    pub crop: Crop,
+}
+
+/// Runs the passes.
+pub trait Backend: Send {
+    /// Takes a sanitised rendered frame: history tracking and background
+    /// collection. Returns the number of dynamic pixels.
+    fn ingest(&mut self, frame: &Prepared, plan: &IngestPlan) -> Result<u32, FramegenError>;
+    /// Runs the generation passes for `job` on the last ingested frame.
+    fn generate(&mut self, job: &Job) -> Result<Output, FramegenError>;
+    /// Drops all history.
+    fn reset(&mut self);
+    /// Wall times of the passes of the last `ingest` + `generate`.
+    fn timings(&self) -> Vec<PassTime>;
+    /// A name for reports ("cpu", or the GPU adapter).
+    fn name(&self) -> String;
+}
+
+/// What the generator remembers of the last rendered frame.
+#[derive(Clone, Debug)]
+struct Current {
+    meta: FrameMeta,
+    prev_pose: Option<Pose>,
+    prev_time: Option<f64>,
+    display: (u32, u32),
+    crop: Crop,
+}
+
+/// The frame generator.
+pub struct FrameGenerator {
+    settings: Settings,
+    backend: Box<dyn Backend>,
+    current: Option<Current>,
+    sanitized: Sanitized,
+    limits: Limits,
+}
+
+impl std::fmt::Debug for FrameGenerator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FrameGenerator")
+            .field("settings", &self.settings)
+            .field("backend", &self.backend.name())
+            .finish()
+    }
+}
+
+impl FrameGenerator {
+    /// A generator on the CPU reference.
+    pub fn cpu(settings: Settings) -> Result<Self, FramegenError> {
+        Self::with_backend(settings, Box::new(crate::cpu::CpuBackend::default()))
+    }
+
+    /// A generator on wgpu.
+    pub fn gpu(settings: Settings, ctx: Arc<GpuContext>) -> Result<Self, FramegenError> {
+        Self::with_backend(settings, Box::new(crate::gpu::GpuBackend::new(ctx)))
+    }
+
+    /// A generator on any backend.
+    pub fn with_backend(
+        settings: Settings,
+        backend: Box<dyn Backend>,
+    ) -> Result<Self, FramegenError> {
+        settings.validate()?;
+        Ok(Self {
+            settings,
+            backend,
+            current: None,
+            sanitized: Sanitized::default(),
+            limits: Limits::default(),
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The backend's name.
+    pub fn backend_name(&self) -> String {
+        self.backend.name()
+    }
+
+    /// Values replaced by input sanitising so far.
+    pub fn sanitized(&self) -> Sanitized {
+        self.sanitized
+    }
+
+    /// Pass timings of the last push + generate.
+    pub fn timings(&self) -> Vec<PassTime> {
+        self.backend.timings()
+    }
+
+    /// Drops all history (the caller signals a cut).
+    pub fn reset(&mut self) {
+        self.current = None;
+        self.backend.reset();
+    }
+
+    /// Takes a rendered frame.
+    pub fn push(&mut self, frame: &Frame) -> Result<PushOutcome, FramegenError> {
+        frame.validate(&self.limits)?;
+        let meta = &frame.meta;
+        let (display, crop) = displayed_region(meta, self.settings.display_size);
+        let restart = match &self.current {
+            None => Some("first frame"),
+            Some(_) if meta.cut => Some("cut flagged by the source"),
+            // A widened window may change the rendered size every frame
+            // (KeepDensity); the passes map between the two grids. Only the
+            // displayed size must stay.
+            Some(c) if c.display != display => Some("display size changed"),
+            Some(c) if c.meta.camera.projection != meta.camera.projection => {
+                Some("projection changed")
+            }
+            Some(c) if meta.time < c.meta.time => Some("time went backwards"),
+            Some(c) if meta.time == c.meta.time && meta.camera.pose == c.meta.camera.pose => {
+                return Ok(PushOutcome::Duplicate);
+            }
+            Some(_) => None,
+        };
+        let prepared = prepare(frame);
+        self.sanitized.color += prepared.sanitized.color;
+        self.sanitized.depth += prepared.sanitized.depth;
+        self.sanitized.motion += prepared.sanitized.motion;
+        if prepared.sanitized.total() > 0 {
+            tracing::debug!(frame = meta.index, sanitized = ?prepared.sanitized, "replaced non-finite input values");
+        }
+        let origin = meta.camera.pose.position;
+        let camera = PassCamera::new(&meta.camera, meta.size, origin);
+        let levels = Levels::new(
+            self.settings.effective_levels(),
+            meta.size.width,
+            meta.size.height,
+        );
+        let mut plan = IngestPlan {
+            camera,
+            prev: None,
+            k: self.settings.effective_history(),
+            epsilon: self.settings.static_epsilon,
+            levels,
+            tolerance: self.settings.depth_tolerance,
+        };
+        let (prev_pose, prev_time) = match (&self.current, restart) {
+            (Some(c), None) => {
+                plan.prev = Some(PassCamera::new(&c.meta.camera, c.meta.size, origin));
+                (Some(c.meta.camera.pose), Some(c.meta.time))
+            }
+            _ => {
+                self.backend.reset();
+                (None, None)
+            }
+        };
+        let mut outcome = match restart {
+            Some(reason) => PushOutcome::Restarted { reason },
+            None => PushOutcome::Continued { dynamic: 0 },
+        };
+        let dynamic = self.backend.ingest(&prepared, &plan)?;
+        let mut prev_pose = prev_pose;
+        let mut prev_time = prev_time;
+        if plan.prev.is_some() {
+            let fraction = dynamic as f32 / prepared.valid.max(1) as f32;
+            if fraction > self.settings.cut_dynamic_fraction && self.settings.method == Method::Gffe
+            {
+                tracing::debug!(
+                    frame = meta.index,
+                    fraction,
+                    "detected a cut: restarting history"
+                );
+                self.backend.reset();
+                plan.prev = None;
+                self.backend.ingest(&prepared, &plan)?;
+                outcome = PushOutcome::Restarted {
+                    reason: "detected cut (most pixels failed the static test)",
+                };
+                prev_pose = None;
+                prev_time = None;
+            } else {
+                outcome = PushOutcome::Continued { dynamic };
+            }
+        }
+        self.current = Some(Current {
+            meta: *meta,
+            prev_pose,
+            prev_time,
+            display,
+            crop,
+        });
+        Ok(outcome)
+    }
+
+    /// A generated frame at `alpha` with the extrapolated camera.
+    pub fn generate(&mut self, alpha: f64) -> Result<Generated, FramegenError> {
+        self.generate_with(alpha, CameraSource::Extrapolated)
+    }
+
+    /// The `n` generated frames of the last rendered frame, α = j/(n+1).
+    pub fn generate_all(&mut self) -> Result<Vec<Generated>, FramegenError> {
+        let n = self.settings.n;
+        (1..=n)
+            .map(|j| self.generate(f64::from(j) / f64::from(n + 1)))
+            .collect()
+    }
+
+    /// A generated frame at `alpha` with the camera from `source`.
+    pub fn generate_with(
+        &mut self,
+        alpha: f64,
+        source: CameraSource,
+    ) -> Result<Generated, FramegenError> {
+        if !(alpha.is_finite() && alpha >= 0.0 && alpha <= self.settings.max_alpha) {
+            return Err(FramegenError::Alpha(alpha, self.settings.max_alpha));
+        }
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let pose = match source {
+            CameraSource::Extrapolated => match &cur.prev_pose {
+                Some(prev) => Pose::extrapolate(prev, &cur.meta.camera.pose, alpha),
+                None => cur.meta.camera.pose,
+            },
+            CameraSource::Given(pose) => {
+                pose.validate().map_err(FramegenError::Camera)?;
+                pose.normalized()
+            }
+        };
+        let camera = Camera {
+            pose,
+            projection: cur.meta.camera.projection,
+            window: Window::FULL,
+        };
+        let (dw, dh) = cur.display;
+        let size = FrameSize {
+            width: dw,
+            height: dh,
+        };
+        let origin = cur.meta.camera.pose.position;
+        let crop = cur.crop;
+        let job = Job {
+            method: self.settings.method,
+            target: PassCamera::new(&camera, size, origin),
+            current: PassCamera::new(&cur.meta.camera, cur.meta.size, origin),
+            alpha: alpha as f32,
+            k: self.settings.effective_history(),
+            map: DisplayMap {
+                offset: crop.origin,
+                scale: crop.scale(),
+            },
+            bg_target: Levels::new(self.settings.effective_levels(), dw, dh),
+            bg_source: Levels::new(
+                self.settings.effective_levels(),
+                cur.meta.size.width,
+                cur.meta.size.height,
+            ),
+            pushpull: self.settings.pushpull_levels,
+            crop,
+        };
+        let interval = match cur.prev_time {
+            Some(t) if cur.meta.time > t => cur.meta.time - t,
+            _ => 0.0,
+        };
+        let meta = FrameMeta {
+            index: cur.meta.index,
+            time: cur.meta.time + alpha * interval,
+            camera,
+            size,
+            host_processing: Duration::ZERO,
+            cut: false,
+        };
+        let out = self.backend.generate(&job)?;
+        Ok(finish(meta, alpha, out))
+    }
+}
+
+/// The displayed size and crop of a frame (DESIGN §4.5).
+fn displayed_region(meta: &FrameMeta, display_size: Option<(u32, u32)>) -> ((u32, u32), Crop) {
+    let (w, h) = (meta.size.width, meta.size.height);
+    let (x0, y0, x1, y1) = meta.camera.window.display_rect(meta.size.as_f64());
+    let extent = Vec2::new((x1 - x0) as f32, (y1 - y0) as f32);
+    let display = display_size.unwrap_or_else(|| {
+        if meta.camera.window.is_full() {
+            (w, h)
+        } else {
+            (
+                (extent.x.round() as u32).max(1),
+                (extent.y.round() as u32).max(1),
+            )
+        }
+    });
+    let crop = Crop {
+        source: (w, h),
+        origin: Vec2::new(x0 as f32, y0 as f32),
+        extent,
+        output: display,
+    };
+    (display, crop)
+}
+
+/// Turns the passes' output into a [`Generated`].
+fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
+    let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
+    let color = out
+        .color
+        .iter()
+        .map(|c| {
+            let ch = |v: f32| f16::from_f32(finite(v).clamp(0.0, crate::input::MAX_RADIANCE));
+            [ch(c[0]), ch(c[1]), ch(c[2]), f16::ONE]
+        })
+        .collect();
+    let depth = out
+        .depth
+        .iter()
+        .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
+        .collect();
+    let motion = out.motion.iter().map(|m| m.map(finite)).collect();
+    let mask = out
+        .mask
+        .iter()
+        .map(|&m| PixelSource::from_mask(m))
+        .collect();
+    let frame = Frame {
+        meta,
+        color,
+        depth,
+        motion,
+        extras: Vec::new(),
+    };
+    Generated {
+        frame,
+        alpha,
+        mask,
+        output: out,
+    }
+}
+
+/// The GFFE passes run by both backends, in order, for a [`Job`]; kept
+/// here so the CPU and GPU backends cannot drift apart in what they run.
+pub fn passes_of(method: Method, levels: u32) -> Vec<Pass> {
+    match method {
+        Method::Repeat => vec![Pass::Crop],
+        Method::Reproject => vec![Pass::Motion, Pass::Warp, Pass::Holes],
+        Method::Gffe if levels > 0 => {
+            vec![Pass::Motion, Pass::Warp, Pass::BgFill, Pass::Holes]
+        }
+        Method::Gffe => vec![Pass::Motion, Pass::Warp, Pass::Holes],
+    }
+}

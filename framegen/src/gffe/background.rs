@@ -1,0 +1,291 @@
+//! Layered background collection, GFFE §4.2 and Fig. 5 (DESIGN §4 step 5).
+//!
+//! The background buffer has `L` levels of (position, color); level `l + 1`
+//! has ¼ the pixels of level `l`, all over the current rendered frame's
+//! image. For each rendered frame:
+//!
+//! 1. the frame's **static** fragments (track word not dynamic, see
+//!    `history.rs`) fill level 0;
+//! 2. for `l = 0..L`, every fragment of the previous buffer's level `l` is
+//!    reprojected into the current camera:
+//!    * **case 1**: the same level is empty there → candidate for `B_l`;
+//!    * **case 2**: the level is occupied by something nearer (by more
+//!      than the relative `depth_tolerance`) → candidate for `B_{l+1}`,
+//!      "the deeper fragments of the current layer";
+//!    * otherwise (the same surface again, or a fragment now in front of
+//!      what the camera sees, i.e. something that left) it is dropped;
+//!
+//!    among candidates for one slot the nearest wins (`splat.rs`). Level
+//!    `l`'s step runs before level `l + 1`'s, so case-2 fragments count as
+//!    "occupied" for the next level.
+//!
+//! Choices made here: a fragment keeps its exact position (camera-relative,
+//! rebased each frame) instead of being re-derived from its slot's centre,
+//! so repeated reprojection does not drift; a slot's "depth" for case 2 is
+//! the view depth of the position it holds; sky directions take part like
+//! any fragment (they are the deepest layer and move only with rotation).
+//! A change of `L` or of the frame size drops the previous buffer.
+
+use glam::Vec3;
+
+use crate::camera::{PassCamera, W_INVALID, cell, rebase};
+use crate::gffe::history::is_dynamic;
+use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::levels::Levels;
+use crate::splat::{self, Candidate, depth_key};
+
+/// Most background levels.
+pub const MAX_LEVELS: u32 = 4;
+
+/// One background fragment (WGSL `BgTexel`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Texel {
+    /// Position (or direction) relative to the current camera centre.
+    pub pos: [f32; 4],
+    /// Linear RGB; alpha 1 = valid, 0 = empty (so a cleared buffer is empty).
+    pub color: [f32; 4],
+}
+
+impl Texel {
+    /// Whether the slot holds a fragment.
+    pub fn is_valid(&self) -> bool {
+        self.color[3] > 0.5
+    }
+}
+
+/// The previous frame's background as the current frame sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct PrevBackground<'a> {
+    /// `C_{t−1}` relative to the current camera centre.
+    pub camera: PassCamera,
+    /// Its levels.
+    pub levels: Levels,
+    /// Its texels.
+    pub texels: &'a [Texel],
+}
+
+/// CPU reference of step 1: level 0 from the static fragments; the other
+/// levels empty.
+pub fn init(p0: &[[f32; 4]], track: &[u32], color: &[[f32; 4]], levels: Levels) -> Vec<Texel> {
+    let mut bg = vec![Texel::default(); levels.total() as usize];
+    if levels.count == 0 {
+        return bg;
+    }
+    for (x, slot) in bg.iter_mut().take(levels.len(0) as usize).enumerate() {
+        if !is_dynamic(track[x]) && p0[x][3] != W_INVALID {
+            let c = color[x];
+            *slot = Texel {
+                pos: p0[x],
+                color: [c[0], c[1], c[2], 1.0],
+            };
+        }
+    }
+    bg
+}
+
+/// The candidate of previous fragment `t` of level `l` (cases 1 and 2).
+pub fn candidate(
+    t: &Texel,
+    shift: Vec3,
+    camera: &PassCamera,
+    bg: &[Texel],
+    levels: Levels,
+    l: u32,
+    tolerance: f32,
+) -> Candidate {
+    if !t.is_valid() {
+        return Candidate::MISS;
+    }
+    let Some(r) = camera.project(rebase(t.pos, shift)) else {
+        return Candidate::MISS;
+    };
+    let (w, h) = levels.size(l);
+    let Some(slot) = cell(r.pixel, w, h, Levels::scale(l)) else {
+        return Candidate::MISS;
+    };
+    let here = bg[(levels.offset(l) + slot) as usize];
+    if !here.is_valid() {
+        return Candidate {
+            slot: levels.offset(l) + slot,
+            key: depth_key(r.depth),
+        };
+    }
+    if l + 1 < levels.count && r.depth > camera.depth_of(here.pos) * (1.0 + tolerance) {
+        let (w1, h1) = levels.size(l + 1);
+        if let Some(s1) = cell(r.pixel, w1, h1, Levels::scale(l + 1)) {
+            return Candidate {
+                slot: levels.offset(l + 1) + s1,
+                key: depth_key(r.depth),
+            };
+        }
+    }
+    Candidate::MISS
+}
+
+/// CPU reference of the whole collection for one rendered frame. `camera`
+/// is `C_t` (centre at the origin); `p0` the frame's `P_0` plane.
+pub fn collect(
+    camera: &PassCamera,
+    p0: &[[f32; 4]],
+    track: &[u32],
+    color: &[[f32; 4]],
+    levels: Levels,
+    prev: Option<PrevBackground<'_>>,
+    tolerance: f32,
+) -> Vec<Texel> {
+    let mut bg = init(p0, track, color, levels);
+    let Some(prev) = prev.filter(|p| p.levels.count == levels.count) else {
+        return bg;
+    };
+    let shift = Vec3::from_slice(&prev.camera.eye[..3]);
+    for l in 0..levels.count {
+        let start = prev.levels.offset(l) as usize;
+        let source = &prev.texels[start..start + prev.levels.len(l) as usize];
+        let cands: Vec<Candidate> = source
+            .iter()
+            .map(|t| candidate(t, shift, camera, &bg, levels, l, tolerance))
+            .collect();
+        let winners = splat::resolve(&cands, bg.len());
+        let end = levels.offset((l + 2).min(levels.count));
+        for s in levels.offset(l)..end {
+            if let Some(i) = winners.winner(s as usize) {
+                let t = source[i];
+                bg[s as usize] = Texel {
+                    pos: rebase(t.pos, shift),
+                    color: t.color,
+                };
+            }
+        }
+    }
+    bg
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    camera: PassCamera,
+    /// previous camera centre (xyz), tolerance
+    shift: [f32; 4],
+    /// n (init), level l, L, 0
+    config: [u32; 4],
+    /// offset, width, height of level l; end of the resolve range
+    level: [u32; 4],
+    /// offset, width, height of level l+1; 1 if it exists
+    next: [u32; 4],
+    /// previous offset and length of level l
+    prev: [u32; 4],
+}
+
+/// The GPU pass.
+#[derive(Debug)]
+pub struct GpuBackground {
+    init: Kernel,
+    project: Kernel,
+    resolve: Kernel,
+}
+
+impl GpuBackground {
+    /// Compiles the kernels.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        let src = include_str!("background.wgsl");
+        Self {
+            init: Kernel::new(
+                ctx,
+                src,
+                "bg_init",
+                &[Uniform, Read, Read, Read, Skip, ReadWrite],
+            ),
+            project: Kernel::new(
+                ctx,
+                src,
+                "bg_project",
+                &[
+                    Uniform, Skip, Skip, Skip, Read, ReadWrite, Skip, Skip, ReadWrite,
+                ],
+            ),
+            resolve: Kernel::new(
+                ctx,
+                src,
+                "bg_resolve",
+                &[Uniform, Skip, Skip, Skip, Read, ReadWrite, Read, Read],
+            ),
+        }
+    }
+
+    /// Records the collection. `bg` receives the new buffer (`levels`);
+    /// `keys`, `winners` and `candidates` are scratch of at least
+    /// `levels.total()` / previous level-0 length elements.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        splat: &splat::GpuSplat,
+        camera: &PassCamera,
+        positions: &wgpu::Buffer,
+        track: &wgpu::Buffer,
+        color: &wgpu::Buffer,
+        levels: Levels,
+        prev: Option<(&PassCamera, Levels, &wgpu::Buffer)>,
+        bg: &wgpu::Buffer,
+        scratch: (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer),
+        tolerance: f32,
+    ) {
+        let total = u64::from(levels.total());
+        encoder.clear_buffer(bg, 0, Some(total * std::mem::size_of::<Texel>() as u64));
+        if levels.count == 0 {
+            return;
+        }
+        let n = levels.len(0);
+        let params = |l: u32, shift: [f32; 3], prev_levels: Option<Levels>| {
+            let (w, h) = levels.size(l);
+            let (w1, h1) = levels.size(l + 1);
+            let end = levels.offset((l + 2).min(levels.count));
+            ctx.uniform(bytemuck::bytes_of(&Params {
+                camera: *camera,
+                shift: [shift[0], shift[1], shift[2], tolerance],
+                config: [n, l, levels.count, 0],
+                level: [levels.offset(l), w, h, end],
+                next: [
+                    levels.offset(l + 1),
+                    w1,
+                    h1,
+                    u32::from(l + 1 < levels.count),
+                ],
+                prev: prev_levels
+                    .map(|p| [p.offset(l), p.len(l), 0, 0])
+                    .unwrap_or_default(),
+            }))
+        };
+        let p = params(0, [0.0; 3], None);
+        self.init.dispatch(
+            ctx,
+            encoder,
+            &[&p, positions, track, color, bg],
+            u64::from(n),
+        );
+        let Some((prev_cam, prev_levels, prev_bg)) = prev.filter(|p| p.1.count == levels.count)
+        else {
+            return;
+        };
+        let (keys, winners, candidates) = scratch;
+        let shift = [prev_cam.eye[0], prev_cam.eye[1], prev_cam.eye[2]];
+        for l in 0..levels.count {
+            let p = params(l, shift, Some(prev_levels));
+            let count = u64::from(prev_levels.len(l));
+            self.project
+                .dispatch(ctx, encoder, &[&p, prev_bg, bg, candidates], count);
+            splat.encode(ctx, encoder, candidates, count, keys, winners, total);
+            let start = levels.offset(l);
+            let end = levels.offset((l + 2).min(levels.count));
+            self.resolve.dispatch(
+                ctx,
+                encoder,
+                &[&p, prev_bg, bg, keys, winners],
+                u64::from(end - start),
+            );
+        }
+    }
+}

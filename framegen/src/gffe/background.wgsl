@@ -1,0 +1,94 @@
+// GFFE §4.2 layered background collection. See `background.rs`.
+
+struct BgTexel {
+    pos: vec4<f32>,
+    color: vec4<f32>,
+};
+
+struct BgParams {
+    camera: Cam,
+    shift: vec4<f32>,
+    config: vec4<u32>,
+    level: vec4<u32>,
+    next: vec4<u32>,
+    prev: vec4<u32>,
+};
+
+@group(0) @binding(0) var<uniform> bp: BgParams;
+@group(0) @binding(1) var<storage, read> positions: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> track: array<u32>;
+@group(0) @binding(3) var<storage, read> color: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> prev_bg: array<BgTexel>;
+@group(0) @binding(5) var<storage, read_write> bg: array<BgTexel>;
+@group(0) @binding(6) var<storage, read> keys: array<u32>;
+@group(0) @binding(7) var<storage, read> winners: array<u32>;
+@group(0) @binding(8) var<storage, read_write> candidates: array<vec2<u32>>;
+
+@compute @workgroup_size(256)
+fn bg_init(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let x = thread_index(wid, nwg, lid);
+    if x >= bp.config.x {
+        return;
+    }
+    let p = positions[x];
+    if (track[x] & 1u) == 0u && p.w != W_INVALID {
+        bg[x] = BgTexel(p, vec4<f32>(color[x].xyz, 1.0));
+    }
+}
+
+fn rebased(p: vec4<f32>) -> vec4<f32> {
+    if p.w > 0.5 {
+        return vec4<f32>(p.xyz + bp.shift.xyz, p.w);
+    }
+    return p;
+}
+
+fn slot_depth(p: vec4<f32>) -> f32 {
+    if p.w < 0.5 {
+        return inf_f32();
+    }
+    return -dot(bp.camera.col2.xyz, p.xyz - bp.camera.eye.xyz);
+}
+
+@compute @workgroup_size(256)
+fn bg_project(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = thread_index(wid, nwg, lid);
+    if i >= bp.prev.y {
+        return;
+    }
+    var out = vec2<u32>(NONE, 0u);
+    let t = prev_bg[bp.prev.x + i];
+    let l = bp.config.y;
+    if t.color.w > 0.5 {
+        let r = project(bp.camera, rebased(t.pos));
+        if r.ok {
+            let s = cell(r.pixel, bp.level.y, bp.level.z, f32(1u << l));
+            if s != NONE {
+                let here = bg[bp.level.x + s];
+                if here.color.w <= 0.5 {
+                    out = vec2<u32>(bp.level.x + s, depth_key(r.depth));
+                } else if bp.next.w == 1u && r.depth > slot_depth(here.pos) * (1.0 + bp.shift.w) {
+                    let s1 = cell(r.pixel, bp.next.y, bp.next.z, f32(1u << (l + 1u)));
+                    if s1 != NONE {
+                        out = vec2<u32>(bp.next.x + s1, depth_key(r.depth));
+                    }
+                }
+            }
+        }
+    }
+    candidates[i] = out;
+}
+
+@compute @workgroup_size(256)
+fn bg_resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let s = bp.level.x + thread_index(wid, nwg, lid);
+    if s >= bp.level.w {
+        return;
+    }
+    let stored = winners[s];
+    if stored == 0u {
+        return;
+    }
+    let t = prev_bg[bp.prev.x + ~stored];
+    bg[s] = BgTexel(rebased(t.pos), t.color);
+}

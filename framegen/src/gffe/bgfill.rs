@@ -1,0 +1,210 @@
+//! Background projection (GFFE §4.2, DESIGN §4 step 6): the collected
+//! background layers are projected into the generated frame and fill only
+//! its holes.
+//!
+//! Level `l` is splatted at its own resolution (the generated frame's size
+//! divided by `2^l`), so one coarse fragment covers a `2^l × 2^l` block and
+//! the coarser layers do not leave pinholes. A hole pixel then takes the
+//! nearest of the levels' winners at its position (ties go to the finer
+//! level). Its motion vector points to where the fragment is in the rendered
+//! frame's displayed region, like a warped pixel's.
+
+use glam::Vec2;
+
+use crate::camera::{PassCamera, cell, pixel_center};
+use crate::gffe::background::{MAX_LEVELS, Texel};
+use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::levels::Levels;
+use crate::output::{BACKGROUND, DisplayMap, EMPTY, Output};
+use crate::splat::{Candidate, Winners, depth_key};
+
+/// CPU reference of `bgfill_project`: one candidate per background texel.
+/// `source` is the background's layout, `target` the generated frame's
+/// pyramid (same level count).
+pub fn project(
+    bg: &[Texel],
+    source: Levels,
+    camera: &PassCamera,
+    target: Levels,
+) -> Vec<Candidate> {
+    bg.iter()
+        .enumerate()
+        .map(|(i, t)| {
+            if !t.is_valid() {
+                return Candidate::MISS;
+            }
+            let l = source.level_of(i as u32);
+            let (w, h) = target.size(l);
+            camera
+                .project(t.pos)
+                .and_then(|r| {
+                    cell(r.pixel, w, h, Levels::scale(l)).map(|s| Candidate {
+                        slot: target.offset(l) + s,
+                        key: depth_key(r.depth),
+                    })
+                })
+                .unwrap_or(Candidate::MISS)
+        })
+        .collect()
+}
+
+/// CPU reference of `bgfill_resolve`: fills the holes of `out`. `current`
+/// is the rendered frame's camera (for the motion vectors).
+pub fn resolve(
+    winners: &Winners,
+    bg: &[Texel],
+    target: Levels,
+    current: &PassCamera,
+    map: DisplayMap,
+    out: &mut Output,
+) {
+    for t in 0..out.mask.len() {
+        if out.mask[t] != EMPTY {
+            continue;
+        }
+        let center = pixel_center(t, out.width);
+        let mut best: Option<(f32, usize)> = None;
+        for l in 0..target.count {
+            let (w, h) = target.size(l);
+            let Some(s) = cell(center, w, h, Levels::scale(l)) else {
+                continue;
+            };
+            let slot = (target.offset(l) + s) as usize;
+            if let (Some(i), Some(d)) = (winners.winner(slot), winners.depth(slot))
+                && best.is_none_or(|(bd, _)| d < bd)
+            {
+                best = Some((d, i));
+            }
+        }
+        let Some((d, i)) = best else {
+            continue;
+        };
+        let texel = bg[i];
+        let c = texel.color;
+        let motion = current
+            .project(texel.pos)
+            .map(|r| map.apply(r.pixel) - center)
+            .unwrap_or(Vec2::ZERO);
+        out.color[t] = [c[0], c[1], c[2], 1.0];
+        out.depth[t] = d;
+        out.motion[t] = motion.to_array();
+        out.mask[t] = BACKGROUND;
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    target: PassCamera,
+    current: PassCamera,
+    map: [f32; 4],
+    /// L, texel count, target width, target height
+    config: [u32; 4],
+    /// Start of each source level (unused levels: the total).
+    source_offsets: [u32; 4],
+    target_offsets: [u32; 4],
+    target_widths: [u32; 4],
+    target_heights: [u32; 4],
+}
+
+/// The GPU pass.
+#[derive(Debug)]
+pub struct GpuBgFill {
+    project: Kernel,
+    resolve: Kernel,
+}
+
+impl GpuBgFill {
+    /// Compiles the kernels.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        let src = include_str!("bgfill.wgsl");
+        Self {
+            project: Kernel::new(
+                ctx,
+                src,
+                "bgfill_project",
+                &[Uniform, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite],
+            ),
+            resolve: Kernel::new(
+                ctx,
+                src,
+                "bgfill_resolve",
+                &[
+                    Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                ],
+            ),
+        }
+    }
+
+    /// The uniform both kernels read.
+    pub fn params(
+        ctx: &GpuContext,
+        target: &PassCamera,
+        current: &PassCamera,
+        map: DisplayMap,
+        source: Levels,
+        target_levels: Levels,
+    ) -> wgpu::Buffer {
+        let mut p = Params {
+            target: *target,
+            current: *current,
+            map: map.to_array(),
+            config: [
+                source.count,
+                source.total(),
+                target.width(),
+                target.height(),
+            ],
+            source_offsets: [source.total(); 4],
+            target_offsets: [0; 4],
+            target_widths: [0; 4],
+            target_heights: [0; 4],
+        };
+        for l in 0..source.count.min(MAX_LEVELS) as usize {
+            p.source_offsets[l] = source.offset(l as u32);
+            p.target_offsets[l] = target_levels.offset(l as u32);
+            let (w, h) = target_levels.size(l as u32);
+            p.target_widths[l] = w;
+            p.target_heights[l] = h;
+        }
+        ctx.uniform(bytemuck::bytes_of(&p))
+    }
+
+    /// Records the projection of every texel into `candidates`.
+    pub fn encode_project(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: &wgpu::Buffer,
+        bg: &wgpu::Buffer,
+        texels: u32,
+        candidates: &wgpu::Buffer,
+    ) {
+        self.project
+            .dispatch(ctx, encoder, &[params, bg, candidates], u64::from(texels));
+    }
+
+    /// Records the hole fill.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_resolve(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        params: &wgpu::Buffer,
+        bg: &wgpu::Buffer,
+        keys: &wgpu::Buffer,
+        winners: &wgpu::Buffer,
+        out: crate::gffe::warp::GpuOutput<'_>,
+        pixels: u32,
+    ) {
+        self.resolve.dispatch(
+            ctx,
+            encoder,
+            &[
+                params, bg, keys, winners, out.color, out.depth, out.motion, out.mask,
+            ],
+            u64::from(pixels),
+        );
+    }
+}

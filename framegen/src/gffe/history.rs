@@ -1,0 +1,243 @@
+//! History tracking with the static test: GFFE Algorithm 1 (appendix B),
+//! DESIGN §4 step 1.
+//!
+//! For each pixel `x` of rendered frame t with depth `D_t[x]`:
+//!
+//! * `p = unproject(x, D_t, C_t)` (camera-relative to `C_t`);
+//! * `x̂ = project(p, C_{t−1})`, `x' = x + V_{t→t−1}[x]`;
+//! * if `‖x̂ − x'‖ > ε` the pixel is **dynamic**: `P_i = P'_{i−1}[x']` for
+//!   `i = 1..k−1` (the previous trajectory shifted by one) and `P_0 = p`;
+//! * otherwise it is **static** and every `P_i = p`.
+//!
+//! Choices the paper leaves open, made here:
+//! * `x'` reads the previous history at the pixel containing it (nearest).
+//! * The **track word** of a pixel is `dynamic | chain << 1`, where `chain`
+//!   counts how many of `P_1..P_{k−1}` are real history: a static pixel's
+//!   entries all hold its (static) position, so its chain is `k − 1`; a
+//!   dynamic pixel extends the chain found at `x'` by one; a trajectory
+//!   that leaves the previous image, meets an empty pixel, or switches
+//!   between a point and a sky direction ends there and the remaining
+//!   entries repeat the last real one (zero velocity, never garbage).
+//! * Invalid depth (sanitised NaN / ≤ 0) gives no position at all.
+//! * Without a previous frame (first frame, cut, reset) every pixel is
+//!   static.
+//!
+//! Positions are stored relative to the current camera centre; the previous
+//! history is rebased by the previous camera's centre (computed in `f64`).
+
+use glam::Vec2;
+
+use crate::camera::{PassCamera, W_INVALID, cell, pixel_center, rebase};
+use crate::gpu::{Binding, GpuContext, Kernel};
+
+/// The previous rendered frame's history, as the current frame sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct PrevHistory<'a> {
+    /// `C_{t−1}` relative to the current camera centre, at its image size.
+    pub camera: PassCamera,
+    /// `k` planes of `width × height` positions (plane `i` is `P'_i`).
+    pub positions: &'a [[f32; 4]],
+    /// Track words.
+    pub track: &'a [u32],
+}
+
+/// The result of Algorithm 1 for one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct History {
+    /// `k` planes of positions, plane `i` = `P_i`.
+    pub positions: Vec<[f32; 4]>,
+    /// Per pixel `dynamic | chain << 1`.
+    pub track: Vec<u32>,
+    /// Number of pixels that failed the static test.
+    pub dynamic: u32,
+}
+
+/// Whether a track word marks a dynamic pixel (`M_dyn = 1`).
+pub fn is_dynamic(track: u32) -> bool {
+    track & 1 == 1
+}
+
+/// How many of `P_1..` are real history.
+pub fn chain(track: u32) -> u32 {
+    track >> 1
+}
+
+#[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
+/// CPU reference of Algorithm 1. `camera` is `C_t` with its centre at the
+/// origin; `k ≥ 1`; `epsilon` in pixels.
+pub fn track(
+    camera: &PassCamera,
+    depth: &[f32],
+    motion: &[[f32; 2]],
+    prev: Option<PrevHistory<'_>>,
+    k: u32,
+    epsilon: f32,
+) -> History {
+    let n = depth.len();
+    let k = (k as usize).clamp(1, MAX_HISTORY);
+    let width = camera.width();
+    let invalid = [0.0, 0.0, 0.0, W_INVALID];
+    let mut positions = vec![invalid; k * n];
+    let mut track_words = vec![0u32; n];
+    let mut dynamic = 0;
+    for x in 0..n {
+        let d = depth[x];
+        if d.is_nan() || d <= 0.0 {
+            continue;
+        }
+        let center = pixel_center(x, width);
+        let p = camera.unproject(center, d);
+        let mut entries = [p; MAX_HISTORY];
+        let mut word = ((k - 1) as u32) << 1;
+        if let Some(prev) = &prev {
+            let target = center + Vec2::from_array(motion[x]);
+            let reprojected = prev.camera.project(p);
+            let is_static = reprojected.is_some_and(|r| {
+                let e = r.pixel - target;
+                e.x * e.x + e.y * e.y <= epsilon * epsilon
+            });
+            if !is_static {
+                dynamic += 1;
+                let prev_n = prev.track.len();
+                let found = cell(target, prev.camera.width(), prev.camera.height(), 1.0)
+                    .map(|j| j as usize);
+                let mut len = 0usize;
+                if let Some(j) = found {
+                    let prev_word = prev.track[j];
+                    let available = if is_dynamic(prev_word) {
+                        chain(prev_word) as usize + 1
+                    } else {
+                        k - 1
+                    };
+                    let limit = available.min(k - 1);
+                    for i in 1..=limit {
+                        let q = rebase(prev.positions[(i - 1) * prev_n + j], shift(prev));
+                        if q[3] != p[3] {
+                            break;
+                        }
+                        entries[i] = q;
+                        len = i;
+                    }
+                }
+                for i in len + 1..k {
+                    entries[i] = entries[i - 1];
+                }
+                word = 1 | (len as u32) << 1;
+            }
+        }
+        for (i, e) in entries.iter().take(k).enumerate() {
+            positions[i * n + x] = *e;
+        }
+        track_words[x] = word;
+    }
+    History {
+        positions,
+        track: track_words,
+        dynamic,
+    }
+}
+
+/// The largest history length `k`.
+pub const MAX_HISTORY: usize = 8;
+
+fn shift(prev: &PrevHistory<'_>) -> glam::Vec3 {
+    glam::Vec3::new(prev.camera.eye[0], prev.camera.eye[1], prev.camera.eye[2])
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    cur: PassCamera,
+    prev: PassCamera,
+    /// width, height, prev width, prev height
+    sizes: [u32; 4],
+    /// k, has_prev, 0, 0
+    config: [u32; 4],
+    /// epsilon, 0, 0, 0
+    epsilon: [f32; 4],
+}
+
+/// The GPU pass.
+#[derive(Debug)]
+pub struct GpuHistory {
+    kernel: Kernel,
+}
+
+/// Buffers of one frame's history on the GPU.
+#[derive(Debug)]
+pub struct GpuHistoryBuffers<'a> {
+    /// `k` planes of `vec4<f32>`.
+    pub positions: &'a wgpu::Buffer,
+    /// Track words.
+    pub track: &'a wgpu::Buffer,
+}
+
+impl GpuHistory {
+    /// Compiles the kernel.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        Self {
+            kernel: Kernel::new(
+                ctx,
+                include_str!("history.wgsl"),
+                "history",
+                &[
+                    Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite,
+                ],
+            ),
+        }
+    }
+
+    /// Records Algorithm 1. `prev` is `None` after a reset (its buffers are
+    /// then not read; `out` is bound in their place). `dynamic` receives the
+    /// count of dynamic pixels (atomic add; clear it first).
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &PassCamera,
+        depth: &wgpu::Buffer,
+        motion: &wgpu::Buffer,
+        prev: Option<(&PassCamera, GpuHistoryBuffers<'_>)>,
+        out: GpuHistoryBuffers<'_>,
+        dynamic: &wgpu::Buffer,
+        k: u32,
+        epsilon: f32,
+    ) {
+        let (w, h) = (camera.width(), camera.height());
+        let (prev_cam, pw, ph) = match &prev {
+            Some((c, _)) => (**c, c.width(), c.height()),
+            None => (*camera, 0, 0),
+        };
+        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+            cur: *camera,
+            prev: prev_cam,
+            sizes: [w, h, pw, ph],
+            config: [k.max(1), u32::from(prev.is_some()), 0, 0],
+            epsilon: [epsilon, 0.0, 0.0, 0.0],
+        }));
+        // Unused previous buffers are bound to placeholders of this frame's
+        // own (read-only bindings cannot alias the written ones).
+        let placeholder = ctx.storage("no previous history", 16);
+        let (pp, pt) = match &prev {
+            Some((_, b)) => (b.positions, b.track),
+            None => (&placeholder, &placeholder),
+        };
+        self.kernel.dispatch(
+            ctx,
+            encoder,
+            &[
+                &params,
+                depth,
+                motion,
+                pp,
+                pt,
+                out.positions,
+                out.track,
+                dynamic,
+            ],
+            u64::from(w) * u64::from(h),
+        );
+    }
+}

@@ -1,0 +1,125 @@
+// Push-pull hole fill. See `holes.rs`.
+
+struct PpTexel {
+    a: vec4<f32>,
+    b: vec4<f32>,
+};
+
+struct PpParams {
+    dst: vec4<u32>,
+    src: vec4<u32>,
+};
+
+@group(0) @binding(0) var<uniform> pp: PpParams;
+@group(0) @binding(1) var<storage, read_write> out_color: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> out_depth: array<f32>;
+@group(0) @binding(3) var<storage, read_write> out_motion: array<vec2<f32>>;
+@group(0) @binding(4) var<storage, read_write> out_mask: array<u32>;
+@group(0) @binding(5) var<storage, read_write> pyramid: array<PpTexel>;
+
+@compute @workgroup_size(256)
+fn pp_init(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let t = thread_index(wid, nwg, lid);
+    if t >= pp.dst.y * pp.dst.z {
+        return;
+    }
+    if out_mask[t] == EMPTY_MASK {
+        pyramid[t] = PpTexel(vec4<f32>(0.0), vec4<f32>(0.0));
+    } else {
+        let c = out_color[t];
+        let m = out_motion[t];
+        let d = out_depth[t];
+        pyramid[t] = PpTexel(vec4<f32>(c.xyz, 1.0), vec4<f32>(select(1.0 / d, 0.0, is_inf(d)), m, 0.0));
+    }
+}
+
+@compute @workgroup_size(256)
+fn pp_pull(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = thread_index(wid, nwg, lid);
+    let dw = pp.dst.y;
+    if i >= dw * pp.dst.z {
+        return;
+    }
+    let x = i % dw;
+    let y = i / dw;
+    var sum_w = 0.0;
+    var sa = vec4<f32>(0.0);
+    var sb = vec4<f32>(0.0);
+    for (var dy = 0u; dy < 2u; dy++) {
+        for (var dx = 0u; dx < 2u; dx++) {
+            let cx = 2u * x + dx;
+            let cy = 2u * y + dy;
+            if cx < pp.src.y && cy < pp.src.z {
+                let c = pyramid[pp.src.x + cy * pp.src.y + cx];
+                let w = c.a.w;
+                sum_w += w;
+                sa += c.a * w;
+                sb += c.b * w;
+            }
+        }
+    }
+    var t = PpTexel(vec4<f32>(0.0), vec4<f32>(0.0));
+    if sum_w > 0.0 {
+        let a = sa / sum_w;
+        t = PpTexel(vec4<f32>(a.xyz, min(sum_w, 1.0)), sb / sum_w);
+    }
+    pyramid[pp.dst.x + i] = t;
+}
+
+fn at(x: f32, y: f32) -> PpTexel {
+    let xi = min(u32(max(x, 0.0)), pp.src.y - 1u);
+    let yi = min(u32(max(y, 0.0)), pp.src.z - 1u);
+    return pyramid[pp.src.x + yi * pp.src.y + xi];
+}
+
+@compute @workgroup_size(256)
+fn pp_push(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = thread_index(wid, nwg, lid);
+    let w = pp.dst.y;
+    if i >= w * pp.dst.z {
+        return;
+    }
+    let own = pyramid[pp.dst.x + i];
+    let wgt = own.a.w;
+    if wgt >= 1.0 {
+        return;
+    }
+    let p = vec2<f32>(f32(i % w) + 0.5, f32(i / w) + 0.5) * 0.5;
+    let q = p - 0.5;
+    let base = floor(q);
+    let f = q - base;
+    let t00 = at(base.x, base.y);
+    let t10 = at(base.x + 1.0, base.y);
+    let t01 = at(base.x, base.y + 1.0);
+    let t11 = at(base.x + 1.0, base.y + 1.0);
+    let pa = (t00.a * (1.0 - f.x) + t10.a * f.x) * (1.0 - f.y) + (t01.a * (1.0 - f.x) + t11.a * f.x) * f.y;
+    let pb = (t00.b * (1.0 - f.x) + t10.b * f.x) * (1.0 - f.y) + (t01.b * (1.0 - f.x) + t11.b * f.x) * f.y;
+    let a = own.a * wgt + pa * (1.0 - wgt);
+    let b = own.b * wgt + pb * (1.0 - wgt);
+    pyramid[pp.dst.x + i] = PpTexel(vec4<f32>(a.xyz, wgt + (1.0 - wgt) * pa.w), b);
+}
+
+@compute @workgroup_size(256)
+fn pp_resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let t = thread_index(wid, nwg, lid);
+    if t >= pp.dst.y * pp.dst.z || out_mask[t] != EMPTY_MASK {
+        return;
+    }
+    let p = pyramid[t];
+    var color = vec3<f32>(0.0);
+    var inv_depth = 0.0;
+    var motion = vec2<f32>(0.0);
+    if p.a.w > 0.0 {
+        color = p.a.xyz;
+        inv_depth = p.b.x;
+        motion = p.b.yz;
+    }
+    out_color[t] = vec4<f32>(color, 1.0);
+    if inv_depth > 0.0 {
+        out_depth[t] = 1.0 / inv_depth;
+    } else {
+        out_depth[t] = inf_f32();
+    }
+    out_motion[t] = motion;
+    out_mask[t] = FILLED_MASK;
+}

@@ -1,0 +1,105 @@
+//! Position estimation, GFFE eq. 1 (DESIGN §4 step 2):
+//! `NP_{t→t+α}[x] = P_0[x] + α (P_0[x] − P_1[x])`.
+//!
+//! With a history longer than two (`k > 2`) the velocity is the mean over the
+//! pixel's real chain, `(P_0 − P_m) / m` with `m` = the chain length of the
+//! track word (see `history.rs`); for `k = 2` this is exactly eq. 1, and a
+//! broken chain falls back to the longest real part. Static pixels, sky
+//! directions and pixels without history keep `P_0`.
+//!
+//! Positions stay relative to the current camera centre; the warp projects
+//! them with the target camera given relative to the same centre.
+
+use glam::Vec3;
+
+use crate::camera::W_POINT;
+use crate::gffe::history::{chain, is_dynamic};
+use crate::gpu::{Binding, GpuContext, Kernel};
+
+/// Eq. 1 for one pixel. `planes` are `P_0..P_{k−1}` of the pixel.
+pub fn estimate_pixel(planes: &[[f32; 4]], track: u32, alpha: f32) -> [f32; 4] {
+    let p0 = planes[0];
+    let m = chain(track) as usize;
+    if !is_dynamic(track) || m == 0 || m >= planes.len() || p0[3] != W_POINT {
+        return p0;
+    }
+    let pm = planes[m];
+    if pm[3] != W_POINT {
+        return p0;
+    }
+    let a = Vec3::new(p0[0], p0[1], p0[2]);
+    let b = Vec3::new(pm[0], pm[1], pm[2]);
+    let velocity = (a - b) / m as f32;
+    let np = a + velocity * alpha;
+    [np.x, np.y, np.z, W_POINT]
+}
+
+/// CPU reference: next positions of every pixel. `positions` holds `k`
+/// planes of `n` pixels.
+pub fn estimate(positions: &[[f32; 4]], track: &[u32], k: u32, alpha: f32) -> Vec<[f32; 4]> {
+    let n = track.len();
+    let k = k.max(1) as usize;
+    let mut planes = Vec::with_capacity(k);
+    (0..n)
+        .map(|x| {
+            planes.clear();
+            planes.extend((0..k).map(|i| positions[i * n + x]));
+            estimate_pixel(&planes, track[x], alpha)
+        })
+        .collect()
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    /// n, k, 0, 0
+    config: [u32; 4],
+    /// alpha, 0, 0, 0
+    motion: [f32; 4],
+}
+
+/// The GPU pass.
+#[derive(Debug)]
+pub struct GpuMotion {
+    kernel: Kernel,
+}
+
+impl GpuMotion {
+    /// Compiles the kernel.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        Self {
+            kernel: Kernel::new(
+                ctx,
+                include_str!("motion.wgsl"),
+                "estimate",
+                &[Uniform, Read, Read, ReadWrite],
+            ),
+        }
+    }
+
+    /// Records eq. 1 for `n` pixels into `next` (`vec4<f32>` per pixel).
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        positions: &wgpu::Buffer,
+        track: &wgpu::Buffer,
+        next: &wgpu::Buffer,
+        n: u32,
+        k: u32,
+        alpha: f32,
+    ) {
+        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+            config: [n, k.max(1), 0, 0],
+            motion: [alpha, 0.0, 0.0, 0.0],
+        }));
+        self.kernel.dispatch(
+            ctx,
+            encoder,
+            &[&params, positions, track, next],
+            u64::from(n),
+        );
+    }
+}

@@ -1,0 +1,161 @@
+//! The depth-tested forward warp (GFFE §4.1 "Warping", DESIGN §4 step 4):
+//! every pixel's next position is projected into the generated frame's
+//! camera and splatted; where several land in one pixel the nearest wins
+//! (see `splat.rs` for the deterministic atomics).
+//!
+//! A warped pixel takes the source pixel's color, the projected depth, and a
+//! motion vector pointing to where the source pixel is in the rendered
+//! frame's displayed region (DESIGN §4: generated motion points from the
+//! generated frame to the frame it was made from).
+
+use crate::camera::{PassCamera, cell, pixel_center};
+use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::output::{DisplayMap, Output, WARPED};
+use crate::splat::{Candidate, Winners, depth_key};
+
+/// CPU reference of `warp_project`: one candidate per source pixel.
+/// `next` and `target` are relative to the same origin.
+pub fn project(next: &[[f32; 4]], target: &PassCamera) -> Vec<Candidate> {
+    next.iter()
+        .map(|&p| {
+            target
+                .project(p)
+                .and_then(|r| {
+                    cell(r.pixel, target.width(), target.height(), 1.0).map(|slot| Candidate {
+                        slot,
+                        key: depth_key(r.depth),
+                    })
+                })
+                .unwrap_or(Candidate::MISS)
+        })
+        .collect()
+}
+
+/// CPU reference of `warp_resolve`: writes every won pixel of `out`.
+pub fn resolve(
+    winners: &Winners,
+    color: &[[f32; 4]],
+    source_width: u32,
+    map: DisplayMap,
+    out: &mut Output,
+) {
+    for t in 0..out.mask.len() {
+        let Some(i) = winners.winner(t) else {
+            continue;
+        };
+        let center = pixel_center(t, out.width);
+        let source = map.apply(pixel_center(i, source_width));
+        let c = color[i];
+        out.color[t] = [c[0], c[1], c[2], 1.0];
+        out.depth[t] = winners.depth(t).unwrap_or(f32::INFINITY);
+        out.motion[t] = (source - center).to_array();
+        out.mask[t] = WARPED;
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    target: PassCamera,
+    /// source count, target width, target height, source width
+    sizes: [u32; 4],
+    map: [f32; 4],
+}
+
+/// The GPU pass (project + resolve; the splat between them is shared).
+#[derive(Debug)]
+pub struct GpuWarp {
+    project: Kernel,
+    resolve: Kernel,
+}
+
+/// The generated frame's buffers on the GPU.
+#[derive(Debug, Clone, Copy)]
+pub struct GpuOutput<'a> {
+    /// `vec4<f32>` color.
+    pub color: &'a wgpu::Buffer,
+    /// `f32` depth.
+    pub depth: &'a wgpu::Buffer,
+    /// `vec2<f32>` motion.
+    pub motion: &'a wgpu::Buffer,
+    /// `u32` mask.
+    pub mask: &'a wgpu::Buffer,
+}
+
+impl GpuWarp {
+    /// Compiles the kernels.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        let src = include_str!("warp.wgsl");
+        Self {
+            project: Kernel::new(
+                ctx,
+                src,
+                "warp_project",
+                &[Uniform, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite],
+            ),
+            resolve: Kernel::new(
+                ctx,
+                src,
+                "warp_resolve",
+                &[
+                    Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                ],
+            ),
+        }
+    }
+
+    fn params(
+        ctx: &GpuContext,
+        target: &PassCamera,
+        n: u32,
+        sw: u32,
+        map: DisplayMap,
+    ) -> wgpu::Buffer {
+        ctx.uniform(bytemuck::bytes_of(&Params {
+            target: *target,
+            sizes: [n, target.width(), target.height(), sw],
+            map: map.to_array(),
+        }))
+    }
+
+    /// Records `warp_project`: `next` (n positions) → `candidates`.
+    pub fn encode_project(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        target: &PassCamera,
+        next: &wgpu::Buffer,
+        n: u32,
+        candidates: &wgpu::Buffer,
+    ) {
+        let params = Self::params(ctx, target, n, 0, DisplayMap::IDENTITY);
+        self.project
+            .dispatch(ctx, encoder, &[&params, next, candidates], u64::from(n));
+    }
+
+    /// Records `warp_resolve` over the target pixels.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_resolve(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        target: &PassCamera,
+        color: &wgpu::Buffer,
+        source_width: u32,
+        map: DisplayMap,
+        keys: &wgpu::Buffer,
+        winners: &wgpu::Buffer,
+        out: GpuOutput<'_>,
+    ) {
+        let params = Self::params(ctx, target, 0, source_width, map);
+        self.resolve.dispatch(
+            ctx,
+            encoder,
+            &[
+                &params, color, keys, winners, out.color, out.depth, out.motion, out.mask,
+            ],
+            u64::from(target.width()) * u64::from(target.height()),
+        );
+    }
+}

@@ -1,0 +1,130 @@
+//! The adaptive window's crop (GFFE §4.3, DESIGN §4.5 and step 8): a frame
+//! rendered with a widened window shows the displayed region
+//! `Window::display_rect` of its image; the client crops (and, in
+//! `KeepSize` mode, resamples) it to the display size.
+//!
+//! Generated frames need no crop: the warp projects straight into the
+//! displayed region of the generated camera. This pass serves the rendered
+//! frames themselves and the `repeat` baseline. It gathers: color is
+//! sampled bilinearly (clamped at the edges), depth and motion take the
+//! nearest pixel, and motion is rescaled to displayed pixels.
+
+use glam::Vec2;
+
+use crate::camera::pixel_center;
+use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::output::{COPIED, Output};
+
+/// Where the displayed region lies in the rendered image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Crop {
+    /// Rendered image width and height.
+    pub source: (u32, u32),
+    /// Top-left corner of the displayed region, rendered pixels.
+    pub origin: Vec2,
+    /// Size of the displayed region, rendered pixels.
+    pub extent: Vec2,
+    /// Output (display) width and height.
+    pub output: (u32, u32),
+}
+
+impl Crop {
+    /// Continuous rendered-image position of output pixel `t`'s centre.
+    pub fn source_of(&self, t: usize) -> Vec2 {
+        let out = Vec2::new(self.output.0 as f32, self.output.1 as f32);
+        self.origin + pixel_center(t, self.output.0) * (self.extent / out)
+    }
+
+    /// Displayed pixels per rendered pixel.
+    pub fn scale(&self) -> Vec2 {
+        Vec2::new(self.output.0 as f32, self.output.1 as f32) / self.extent
+    }
+}
+
+fn clamp_index(p: Vec2, w: u32, h: u32) -> usize {
+    let x = (p.x.max(0.0) as u32).min(w - 1);
+    let y = (p.y.max(0.0) as u32).min(h - 1);
+    (y * w + x) as usize
+}
+
+/// CPU reference of `crop`.
+pub fn crop(color: &[[f32; 4]], depth: &[f32], motion: &[[f32; 2]], c: &Crop) -> Output {
+    let (w, h) = c.source;
+    let mut out = Output::empty(c.output.0, c.output.1);
+    let scale = c.scale();
+    for t in 0..out.mask.len() {
+        let s = c.source_of(t);
+        let q = s - 0.5;
+        let base = q.floor();
+        let f = q - base;
+        let at = |dx: f32, dy: f32| {
+            glam::Vec4::from_array(color[clamp_index(base + Vec2::new(dx, dy), w, h)])
+        };
+        let rgb = (at(0.0, 0.0) * (1.0 - f.x) + at(1.0, 0.0) * f.x) * (1.0 - f.y)
+            + (at(0.0, 1.0) * (1.0 - f.x) + at(1.0, 1.0) * f.x) * f.y;
+        let nearest = clamp_index(s, w, h);
+        out.color[t] = [rgb.x, rgb.y, rgb.z, 1.0];
+        out.depth[t] = depth[nearest];
+        out.motion[t] = (Vec2::from_array(motion[nearest]) * scale).to_array();
+        out.mask[t] = COPIED;
+    }
+    out
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    /// source width, height, output width, height
+    sizes: [u32; 4],
+    /// origin, extent
+    rect: [f32; 4],
+}
+
+/// The GPU pass.
+#[derive(Debug)]
+pub struct GpuCrop {
+    kernel: Kernel,
+}
+
+impl GpuCrop {
+    /// Compiles the kernel.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        Self {
+            kernel: Kernel::new(
+                ctx,
+                include_str!("window.wgsl"),
+                "crop",
+                &[
+                    Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                ],
+            ),
+        }
+    }
+
+    /// Records the crop of the rendered buffers into `out`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        c: &Crop,
+        color: &wgpu::Buffer,
+        depth: &wgpu::Buffer,
+        motion: &wgpu::Buffer,
+        out: crate::gffe::warp::GpuOutput<'_>,
+    ) {
+        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+            sizes: [c.source.0, c.source.1, c.output.0, c.output.1],
+            rect: [c.origin.x, c.origin.y, c.extent.x, c.extent.y],
+        }));
+        self.kernel.dispatch(
+            ctx,
+            encoder,
+            &[
+                &params, color, depth, motion, out.color, out.depth, out.motion, out.mask,
+            ],
+            u64::from(c.output.0) * u64::from(c.output.1),
+        );
+    }
+}

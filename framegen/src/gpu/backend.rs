@@ -1,0 +1,507 @@
+//! The wgpu backend: the same passes as [`crate::cpu::CpuBackend`], as
+//! compute kernels over storage buffers. Per-pass wall times (submit +
+//! wait; lavapipe's timestamp queries are unreliable) are recorded when
+//! profiling is on; otherwise each ingest and each generation is one
+//! submission.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::FramegenError;
+use crate::camera::PassCamera;
+use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime};
+use crate::gffe::background::{GpuBackground, Texel as BgTexel};
+use crate::gffe::bgfill::GpuBgFill;
+use crate::gffe::history::{GpuHistory, GpuHistoryBuffers};
+use crate::gffe::holes::{self, GpuHoles, Texel as PpTexel};
+use crate::gffe::motion::GpuMotion;
+use crate::gffe::warp::{GpuOutput, GpuWarp};
+use crate::gffe::window::GpuCrop;
+use crate::gpu::GpuContext;
+use crate::input::Prepared;
+use crate::levels::Levels;
+use crate::output::Output;
+use crate::settings::Method;
+use crate::splat::GpuSplat;
+
+/// Every kernel, compiled once.
+#[derive(Debug)]
+struct Kernels {
+    history: GpuHistory,
+    motion: GpuMotion,
+    warp: GpuWarp,
+    splat: GpuSplat,
+    background: GpuBackground,
+    bgfill: GpuBgFill,
+    holes: GpuHoles,
+    crop: GpuCrop,
+}
+
+/// One ingested frame on the GPU.
+#[derive(Debug)]
+struct FrameBuffers {
+    camera: PassCamera,
+    n: u32,
+    k: u32,
+    levels: Levels,
+    color: wgpu::Buffer,
+    depth: wgpu::Buffer,
+    motion: wgpu::Buffer,
+    positions: wgpu::Buffer,
+    track: wgpu::Buffer,
+    background: wgpu::Buffer,
+}
+
+impl FrameBuffers {
+    fn new(ctx: &GpuContext, n: u32, k: u32, levels: Levels, camera: PassCamera) -> Self {
+        let n64 = u64::from(n);
+        Self {
+            camera,
+            n,
+            k,
+            levels,
+            color: ctx.storage("color", n64 * 16),
+            depth: ctx.storage("depth", n64 * 4),
+            motion: ctx.storage("motion", n64 * 8),
+            positions: ctx.storage("history", n64 * u64::from(k) * 16),
+            track: ctx.storage("track", n64 * 4),
+            background: ctx.storage(
+                "background",
+                u64::from(levels.total()) * std::mem::size_of::<BgTexel>() as u64,
+            ),
+        }
+    }
+}
+
+/// Scratch buffers, grown on demand.
+#[derive(Debug, Default)]
+struct Scratch {
+    next: Option<wgpu::Buffer>,
+    candidates: Option<wgpu::Buffer>,
+    keys: Option<wgpu::Buffer>,
+    winners: Option<wgpu::Buffer>,
+    color: Option<wgpu::Buffer>,
+    depth: Option<wgpu::Buffer>,
+    motion: Option<wgpu::Buffer>,
+    mask: Option<wgpu::Buffer>,
+    pyramid: Option<wgpu::Buffer>,
+    dynamic: Option<wgpu::Buffer>,
+}
+
+fn ensure<'a>(
+    ctx: &GpuContext,
+    slot: &'a mut Option<wgpu::Buffer>,
+    label: &str,
+    bytes: u64,
+) -> &'a wgpu::Buffer {
+    let bytes = bytes.max(16);
+    if slot.as_ref().is_none_or(|b| b.size() < bytes) {
+        *slot = Some(ctx.storage(label, bytes));
+    }
+    slot.as_ref().expect("just allocated")
+}
+
+/// Records passes into one submission, or one per pass when profiling.
+struct Recorder<'a> {
+    ctx: &'a GpuContext,
+    profile: bool,
+    encoder: Option<wgpu::CommandEncoder>,
+    timings: &'a mut Vec<PassTime>,
+}
+
+impl Recorder<'_> {
+    fn pass(
+        &mut self,
+        pass: Pass,
+        f: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) -> Result<(), FramegenError> {
+        let start = Instant::now();
+        let encoder = self
+            .encoder
+            .get_or_insert_with(|| self.ctx.device.create_command_encoder(&Default::default()));
+        f(encoder);
+        if self.profile {
+            self.flush()?;
+            self.timings.push(PassTime {
+                pass,
+                time: start.elapsed(),
+            });
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), FramegenError> {
+        if let Some(encoder) = self.encoder.take() {
+            self.ctx.queue.submit([encoder.finish()]);
+            self.ctx.wait()?;
+        }
+        Ok(())
+    }
+}
+
+/// The wgpu backend.
+#[derive(Debug)]
+pub struct GpuBackend {
+    ctx: Arc<GpuContext>,
+    kernels: Kernels,
+    current: Option<FrameBuffers>,
+    spare: Option<FrameBuffers>,
+    scratch: Scratch,
+    profile: bool,
+    timings: Vec<PassTime>,
+}
+
+impl GpuBackend {
+    /// Compiles every kernel on `ctx`.
+    pub fn new(ctx: Arc<GpuContext>) -> Self {
+        let c = &ctx;
+        let kernels = Kernels {
+            history: GpuHistory::new(c),
+            motion: GpuMotion::new(c),
+            warp: GpuWarp::new(c),
+            splat: GpuSplat::new(c),
+            background: GpuBackground::new(c),
+            bgfill: GpuBgFill::new(c),
+            holes: GpuHoles::new(c),
+            crop: GpuCrop::new(c),
+        };
+        Self {
+            ctx,
+            kernels,
+            current: None,
+            spare: None,
+            scratch: Scratch::default(),
+            profile: false,
+            timings: Vec::new(),
+        }
+    }
+
+    /// A backend that submits and waits after every pass and records its
+    /// wall time.
+    pub fn profiled(ctx: Arc<GpuContext>) -> Self {
+        let mut b = Self::new(ctx);
+        b.profile = true;
+        b
+    }
+
+    fn read_output(&self, n: u32) -> Result<Output, FramegenError> {
+        let s = &self.scratch;
+        let (Some(color), Some(depth), Some(motion), Some(mask)) =
+            (&s.color, &s.depth, &s.motion, &s.mask)
+        else {
+            return Err(FramegenError::Device("output buffers missing".into()));
+        };
+        let n = n as usize;
+        let _ = (color, depth, motion, mask);
+        Ok(Output {
+            width: 0,
+            height: 0,
+            color: bytemuck::cast_slice::<f32, [f32; 4]>(&self.ctx.read_pod::<f32>(color, n * 4)?)
+                .to_vec(),
+            depth: self.ctx.read_pod(depth, n)?,
+            motion: bytemuck::cast_slice::<f32, [f32; 2]>(
+                &self.ctx.read_pod::<f32>(motion, n * 2)?,
+            )
+            .to_vec(),
+            mask: self.ctx.read_pod(mask, n)?,
+        })
+    }
+}
+
+impl Backend for GpuBackend {
+    fn ingest(&mut self, frame: &Prepared, plan: &IngestPlan) -> Result<u32, FramegenError> {
+        self.timings.clear();
+        let ctx = &*self.ctx;
+        let n = frame.depth.len() as u32;
+        let start = Instant::now();
+        let mut buffers = match self.spare.take() {
+            Some(b) if b.n == n && b.k == plan.k && b.levels == plan.levels => b,
+            _ => FrameBuffers::new(ctx, n, plan.k, plan.levels, plan.camera),
+        };
+        buffers.camera = plan.camera;
+        ctx.queue
+            .write_buffer(&buffers.color, 0, bytemuck::cast_slice(&frame.color));
+        ctx.queue
+            .write_buffer(&buffers.depth, 0, bytemuck::cast_slice(&frame.depth));
+        ctx.queue
+            .write_buffer(&buffers.motion, 0, bytemuck::cast_slice(&frame.motion));
+        if self.profile {
+            ctx.queue.submit([]);
+            ctx.wait()?;
+            self.timings.push(PassTime {
+                pass: Pass::Upload,
+                time: start.elapsed(),
+            });
+        }
+        let prev = match plan.prev {
+            Some(camera) => self.current.take().map(|b| (camera, b)),
+            None => None,
+        };
+        let Self {
+            kernels, scratch, ..
+        } = self;
+        let dynamic = ensure(ctx, &mut scratch.dynamic, "dynamic count", 16);
+        let max_prev = prev.as_ref().map_or(0, |(_, p)| p.levels.len(0));
+        let keys = ensure(
+            ctx,
+            &mut scratch.keys,
+            "keys",
+            u64::from(plan.levels.total().max(n)) * 4,
+        )
+        .clone();
+        let winners = ensure(
+            ctx,
+            &mut scratch.winners,
+            "winners",
+            u64::from(plan.levels.total().max(n)) * 4,
+        )
+        .clone();
+        let candidates = ensure(
+            ctx,
+            &mut scratch.candidates,
+            "candidates",
+            u64::from(max_prev.max(n)) * 8,
+        )
+        .clone();
+        let dynamic = dynamic.clone();
+        let mut rec = Recorder {
+            ctx,
+            profile: self.profile,
+            encoder: None,
+            timings: &mut self.timings,
+        };
+        rec.pass(Pass::History, |enc| {
+            enc.clear_buffer(&dynamic, 0, None);
+            let prev_h = prev
+                .as_ref()
+                .filter(|(_, p)| p.k == plan.k)
+                .map(|(cam, p)| {
+                    (
+                        cam,
+                        GpuHistoryBuffers {
+                            positions: &p.positions,
+                            track: &p.track,
+                        },
+                    )
+                });
+            kernels.history.encode(
+                ctx,
+                enc,
+                &plan.camera,
+                &buffers.depth,
+                &buffers.motion,
+                prev_h,
+                GpuHistoryBuffers {
+                    positions: &buffers.positions,
+                    track: &buffers.track,
+                },
+                &dynamic,
+                plan.k,
+                plan.epsilon,
+            );
+        })?;
+        rec.pass(Pass::Background, |enc| {
+            kernels.background.encode(
+                ctx,
+                enc,
+                &kernels.splat,
+                &plan.camera,
+                &buffers.positions,
+                &buffers.track,
+                &buffers.color,
+                plan.levels,
+                prev.as_ref().map(|(cam, p)| (cam, p.levels, &p.background)),
+                &buffers.background,
+                (&keys, &winners, &candidates),
+                plan.tolerance,
+            );
+        })?;
+        rec.flush()?;
+        let count = if plan.prev.is_some() {
+            ctx.read_pod::<u32>(&dynamic, 1)?[0]
+        } else {
+            0
+        };
+        self.spare = prev.map(|(_, b)| b);
+        self.current = Some(buffers);
+        Ok(count)
+    }
+
+    fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
+        let ctx = &*self.ctx;
+        self.timings
+            .retain(|p| matches!(p.pass, Pass::Upload | Pass::History | Pass::Background));
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let (tw, th) = (job.target.width(), job.target.height());
+        let tn = tw * th;
+        let Self {
+            kernels, scratch, ..
+        } = self;
+        let out_color = ensure(ctx, &mut scratch.color, "out color", u64::from(tn) * 16).clone();
+        let out_depth = ensure(ctx, &mut scratch.depth, "out depth", u64::from(tn) * 4).clone();
+        let out_motion = ensure(ctx, &mut scratch.motion, "out motion", u64::from(tn) * 8).clone();
+        let out_mask = ensure(ctx, &mut scratch.mask, "out mask", u64::from(tn) * 4).clone();
+        let slots = tn.max(job.bg_target.total());
+        let keys = ensure(ctx, &mut scratch.keys, "keys", u64::from(slots) * 4).clone();
+        let winners = ensure(ctx, &mut scratch.winners, "winners", u64::from(slots) * 4).clone();
+        let candidates = ensure(
+            ctx,
+            &mut scratch.candidates,
+            "candidates",
+            u64::from(cur.n.max(cur.levels.total())) * 8,
+        )
+        .clone();
+        let next = ensure(
+            ctx,
+            &mut scratch.next,
+            "next positions",
+            u64::from(cur.n) * 16,
+        )
+        .clone();
+        let layout = holes::layout(tw, th, job.pushpull);
+        let pyramid = ensure(
+            ctx,
+            &mut scratch.pyramid,
+            "pyramid",
+            u64::from(layout.total()) * std::mem::size_of::<PpTexel>() as u64,
+        )
+        .clone();
+        let out = GpuOutput {
+            color: &out_color,
+            depth: &out_depth,
+            motion: &out_motion,
+            mask: &out_mask,
+        };
+        let mut rec = Recorder {
+            ctx,
+            profile: self.profile,
+            encoder: None,
+            timings: &mut self.timings,
+        };
+        if job.method == Method::Repeat {
+            rec.pass(Pass::Crop, |enc| {
+                kernels.crop.encode(
+                    ctx,
+                    enc,
+                    &job.crop,
+                    &cur.color,
+                    &cur.depth,
+                    &cur.motion,
+                    out,
+                );
+                enc.clear_buffer(&out_motion, 0, Some(u64::from(tn) * 8));
+            })?;
+        } else {
+            rec.pass(Pass::Motion, |enc| {
+                kernels.motion.encode(
+                    ctx,
+                    enc,
+                    &cur.positions,
+                    &cur.track,
+                    &next,
+                    cur.n,
+                    cur.k,
+                    job.alpha,
+                );
+            })?;
+            rec.pass(Pass::Warp, |enc| {
+                enc.clear_buffer(&out_mask, 0, Some(u64::from(tn) * 4));
+                kernels
+                    .warp
+                    .encode_project(ctx, enc, &job.target, &next, cur.n, &candidates);
+                kernels.splat.encode(
+                    ctx,
+                    enc,
+                    &candidates,
+                    u64::from(cur.n),
+                    &keys,
+                    &winners,
+                    u64::from(tn),
+                );
+                kernels.warp.encode_resolve(
+                    ctx,
+                    enc,
+                    &job.target,
+                    &cur.color,
+                    cur.camera.width(),
+                    job.map,
+                    &keys,
+                    &winners,
+                    out,
+                );
+            })?;
+            if cur.levels.count > 0 && job.bg_target.count == cur.levels.count {
+                rec.pass(Pass::BgFill, |enc| {
+                    let params = GpuBgFill::params(
+                        ctx,
+                        &job.target,
+                        &cur.camera,
+                        job.map,
+                        cur.levels,
+                        job.bg_target,
+                    );
+                    let texels = cur.levels.total();
+                    kernels.bgfill.encode_project(
+                        ctx,
+                        enc,
+                        &params,
+                        &cur.background,
+                        texels,
+                        &candidates,
+                    );
+                    kernels.splat.encode(
+                        ctx,
+                        enc,
+                        &candidates,
+                        u64::from(texels),
+                        &keys,
+                        &winners,
+                        u64::from(job.bg_target.total()),
+                    );
+                    kernels.bgfill.encode_resolve(
+                        ctx,
+                        enc,
+                        &params,
+                        &cur.background,
+                        &keys,
+                        &winners,
+                        out,
+                        tn,
+                    );
+                })?;
+            }
+            rec.pass(Pass::Holes, |enc| {
+                kernels.holes.encode(ctx, enc, out, &pyramid, layout);
+            })?;
+        }
+        rec.flush()?;
+        let start = Instant::now();
+        let mut output = self.read_output(tn)?;
+        output.width = tw;
+        output.height = th;
+        if self.profile {
+            self.timings.push(PassTime {
+                pass: Pass::Readback,
+                time: start.elapsed(),
+            });
+        }
+        Ok(output)
+    }
+
+    fn reset(&mut self) {
+        if let Some(b) = self.current.take() {
+            self.spare = Some(b);
+        }
+    }
+
+    fn timings(&self) -> Vec<PassTime> {
+        self.timings.clone()
+    }
+
+    fn name(&self) -> String {
+        format!(
+            "wgpu {} ({:?})",
+            self.ctx.adapter_info.name, self.ctx.adapter_info.backend
+        )
+    }
+}

@@ -1,0 +1,116 @@
+// Shared by every framegen pass; mirrored in Rust by `camera.rs` and
+// `splat.rs` (the CPU reference). Keep the two in step.
+
+// A camera as the passes see it (see `camera.rs` `PassCamera`).
+struct Cam {
+    // Columns of the world-from-view rotation (w unused).
+    col0: vec4<f32>,
+    col1: vec4<f32>,
+    col2: vec4<f32>,
+    // Camera centre relative to the pass's reference origin (w unused).
+    eye: vec4<f32>,
+    // tan(fov_y / 2) * aspect, tan(fov_y / 2), unused, unused.
+    proj: vec4<f32>,
+    // Window u0, v1, width, height (base NDC).
+    window: vec4<f32>,
+    // Image width, height (pixels), unused, unused.
+    size: vec4<f32>,
+};
+
+// A projected point: continuous pixel position and depth key; `ok` is false
+// for points behind the camera or non-finite positions.
+struct Proj {
+    pixel: vec2<f32>,
+    depth: f32,
+    ok: bool,
+};
+
+const W_POINT: f32 = 1.0;
+const W_DIRECTION: f32 = 0.0;
+const W_INVALID: f32 = -1.0;
+const INF_BITS: u32 = 0x7f800000u;
+const NONE: u32 = 0xffffffffu;
+
+fn thread_index(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
+    return (wid.y * nwg.x + wid.x) * 256u + lid;
+}
+
+fn inf_f32() -> f32 {
+    return bitcast<f32>(INF_BITS);
+}
+
+fn is_inf(d: f32) -> bool {
+    return bitcast<u32>(d) == INF_BITS;
+}
+
+// Position (w = 1) or direction (w = 0) seen through pixel centre `px` at
+// linear depth `d` (> 0, +inf for sky). Relative to the reference origin.
+fn unproject(cam: Cam, px: vec2<f32>, d: f32) -> vec4<f32> {
+    let ndc_x = cam.window.x + px.x / cam.size.x * cam.window.z;
+    let ndc_y = cam.window.y - px.y / cam.size.y * cam.window.w;
+    let ray = vec3<f32>(ndc_x * cam.proj.x, ndc_y * cam.proj.y, -1.0);
+    let world = cam.col0.xyz * ray.x + cam.col1.xyz * ray.y + cam.col2.xyz * ray.z;
+    if is_inf(d) {
+        return vec4<f32>(normalize(world), W_DIRECTION);
+    }
+    return vec4<f32>(cam.eye.xyz + world * d, W_POINT);
+}
+
+fn project(cam: Cam, p: vec4<f32>) -> Proj {
+    var out: Proj;
+    out.ok = false;
+    out.pixel = vec2<f32>(0.0);
+    out.depth = 0.0;
+    if p.w < 0.0 {
+        return out;
+    }
+    var rel = p.xyz;
+    if p.w > 0.5 {
+        rel = p.xyz - cam.eye.xyz;
+    }
+    let v = vec3<f32>(dot(cam.col0.xyz, rel), dot(cam.col1.xyz, rel), dot(cam.col2.xyz, rel));
+    let z = -v.z;
+    if !(z > 0.0) {
+        return out;
+    }
+    let ndc_x = v.x / (z * cam.proj.x);
+    let ndc_y = v.y / (z * cam.proj.y);
+    let px = (ndc_x - cam.window.x) / cam.window.z * cam.size.x;
+    let py = (cam.window.y - ndc_y) / cam.window.w * cam.size.y;
+    // Far off-screen values are rejected by the bounds tests of the callers;
+    // keep them finite-comparable.
+    out.pixel = vec2<f32>(px, py);
+    if p.w > 0.5 {
+        out.depth = z;
+    } else {
+        out.depth = inf_f32();
+    }
+    out.ok = abs(px) < 1e30 && abs(py) < 1e30;
+    return out;
+}
+
+// Linear index of the pixel containing continuous position `px` in a
+// `w` x `h` grid scaled down by `scale`, or NONE outside.
+fn cell(px: vec2<f32>, w: u32, h: u32, scale: f32) -> u32 {
+    let q = px / scale;
+    if !(q.x >= 0.0 && q.y >= 0.0 && q.x < f32(w) && q.y < f32(h)) {
+        return NONE;
+    }
+    return u32(q.y) * w + u32(q.x);
+}
+
+// Splat key of a depth: larger is nearer, 0 is "empty" (see `splat.rs`).
+fn depth_key(d: f32) -> u32 {
+    return ~bitcast<u32>(d);
+}
+
+fn key_depth(k: u32) -> f32 {
+    return bitcast<f32>(~k);
+}
+
+// Generated-pixel sources (see `output.rs`).
+const EMPTY_MASK: u32 = 0u;
+const WARPED_MASK: u32 = 1u;
+const BACKGROUND_MASK: u32 = 2u;
+const FILLED_MASK: u32 = 3u;
+const COPIED_MASK: u32 = 4u;

@@ -1,0 +1,319 @@
+//! The wgpu side shared by every pass: the device, compute kernels built from
+//! WGSL with an explicit binding list, storage buffers, dispatch and
+//! read-back.
+//!
+//! Every pass works on plain storage buffers (no textures), so a pass and its
+//! CPU reference index the same arrays the same way and can be compared
+//! element by element. Shaders are the pass's own `.wgsl` file, prefixed with
+//! `common.wgsl` (the camera model and the splat keys).
+
+use std::sync::Arc;
+
+use wgpu::util::DeviceExt;
+
+use crate::FramegenError;
+
+/// Threads per workgroup of every 1-D kernel (see `common.wgsl`).
+pub const WORKGROUP: u32 = 256;
+
+/// Largest workgroup count along one dispatch dimension (WebGPU's default).
+const MAX_GROUPS_X: u32 = 32768;
+
+mod backend;
+pub use backend::GpuBackend;
+
+/// The WGSL every pass shader is prefixed with (see `common.wgsl`).
+pub const COMMON_WGSL: &str = include_str!("common.wgsl");
+
+/// An opened GPU device, shareable between generators (and with a
+/// presenter).
+#[derive(Debug)]
+pub struct GpuContext {
+    /// The logical device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// Adapter name and backend, for reports.
+    pub adapter_info: wgpu::AdapterInfo,
+}
+
+impl GpuContext {
+    /// Opens an adapter. Without `WGPU_BACKEND` set, Vulkan is preferred
+    /// (Mesa's lavapipe on machines without a GPU) and any other backend is
+    /// the fallback. The device gets the adapter's own limits, because
+    /// 8192-pixel frames need storage buffers beyond WebGPU's defaults.
+    pub fn new() -> Result<Arc<Self>, FramegenError> {
+        let request = |desc: wgpu::InstanceDescriptor| {
+            let instance = wgpu::Instance::new(desc);
+            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                apply_limit_buckets: false,
+            }))
+        };
+        let adapter = if std::env::var_os("WGPU_BACKEND").is_some() {
+            request(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+        } else {
+            let mut vulkan = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+            vulkan.backends = wgpu::Backends::VULKAN;
+            request(vulkan).or_else(|_| {
+                request(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+            })
+        }
+        .map_err(|e| FramegenError::NoAdapter(e.to_string()))?;
+        Self::from_adapter(&adapter)
+    }
+
+    /// Opens a device on an adapter the caller picked (e.g. one compatible
+    /// with a window surface).
+    pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<Arc<Self>, FramegenError> {
+        let adapter_info = adapter.get_info();
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("framegen"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits,
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|e| FramegenError::Device(e.to_string()))?;
+        tracing::debug!(adapter = %adapter_info.name, backend = ?adapter_info.backend, "framegen GPU ready");
+        Ok(Arc::new(Self {
+            device,
+            queue,
+            adapter_info,
+        }))
+    }
+
+    /// Blocks until every submitted command buffer has finished.
+    pub fn wait(&self) -> Result<(), FramegenError> {
+        self.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: None,
+                timeout: None,
+            })
+            .map(|_| ())
+            .map_err(|e| FramegenError::Device(e.to_string()))
+    }
+
+    /// A zeroed storage buffer of `bytes` bytes (at least 4, so empty frames
+    /// still bind).
+    pub fn storage(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(16).next_multiple_of(4),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// A storage buffer initialised with `data`.
+    pub fn storage_init(&self, label: &str, data: &[u8]) -> wgpu::Buffer {
+        let buffer = self.storage(label, data.len() as u64);
+        if !data.is_empty() {
+            self.queue.write_buffer(&buffer, 0, data);
+        }
+        buffer
+    }
+
+    /// A uniform buffer holding `data`.
+    pub fn uniform(&self, data: &[u8]) -> wgpu::Buffer {
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("pass params"),
+                contents: data,
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+    }
+
+    /// Copies `len` bytes of `buffer` back to the CPU (submits and waits).
+    pub fn read(&self, buffer: &wgpu::Buffer, len: u64) -> Result<Vec<u8>, FramegenError> {
+        if len == 0 {
+            return Ok(Vec::new());
+        }
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("read-back"),
+            size: len.next_multiple_of(4),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, len.next_multiple_of(4));
+        self.queue.submit([encoder.finish()]);
+        let slice = staging.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        rx.recv()
+            .map_err(|e| FramegenError::Device(e.to_string()))?
+            .map_err(|e| FramegenError::Device(e.to_string()))?;
+        let bytes = {
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| FramegenError::Device(format!("read-back: {e:?}")))?;
+            view[..len as usize].to_vec()
+        };
+        staging.unmap();
+        Ok(bytes)
+    }
+
+    /// Reads back `count` plain-old-data elements.
+    pub fn read_pod<T: bytemuck::Pod>(
+        &self,
+        buffer: &wgpu::Buffer,
+        count: usize,
+    ) -> Result<Vec<T>, FramegenError> {
+        let bytes = self.read(buffer, (count * std::mem::size_of::<T>()) as u64)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+}
+
+/// How a kernel sees one binding (its index is its place in the list).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Binding {
+    /// `var<uniform>`: the pass parameters.
+    Uniform,
+    /// `var<storage, read>`.
+    Read,
+    /// `var<storage, read_write>` (plain or atomic).
+    ReadWrite,
+    /// A binding number this entry point does not use (another entry point
+    /// of the same file does); no buffer is passed for it.
+    Skip,
+}
+
+/// One compute entry point with its explicit bind group layout.
+#[derive(Debug)]
+pub struct Kernel {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    /// Binding numbers of the buffers `dispatch` takes, in order.
+    slots: Vec<u32>,
+    name: &'static str,
+}
+
+impl Kernel {
+    /// Compiles `entry` of `common.wgsl + source`. `bindings` lists group 0's
+    /// bindings in order; every entry point of one shader file uses the same
+    /// list.
+    pub fn new(ctx: &GpuContext, source: &str, entry: &'static str, bindings: &[Binding]) -> Self {
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(entry),
+                source: wgpu::ShaderSource::Wgsl(format!("{COMMON_WGSL}\n{source}").into()),
+            });
+        let entries: Vec<_> = bindings
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| **b != Binding::Skip)
+            .map(|(i, b)| wgpu::BindGroupLayoutEntry {
+                binding: i as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: match b {
+                    Binding::Uniform => wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    Binding::Read | Binding::ReadWrite | Binding::Skip => {
+                        wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Storage {
+                                read_only: *b == Binding::Read,
+                            },
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        }
+                    }
+                },
+                count: None,
+            })
+            .collect();
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(entry),
+                entries: &entries,
+            });
+        let pipeline_layout = ctx
+            .device
+            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(entry),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+        let pipeline = ctx
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        let slots = bindings
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| **b != Binding::Skip)
+            .map(|(i, _)| i as u32)
+            .collect();
+        Self {
+            pipeline,
+            layout,
+            slots,
+            name: entry,
+        }
+    }
+
+    /// Records a dispatch over `items` threads (1-D, folded into 2-D
+    /// workgroup grids for large counts) with the given buffers bound in
+    /// order (skipped binding numbers take no buffer).
+    pub fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        buffers: &[&wgpu::Buffer],
+        items: u64,
+    ) {
+        if items == 0 {
+            return;
+        }
+        assert_eq!(
+            buffers.len(),
+            self.slots.len(),
+            "kernel {} binds {} buffers",
+            self.name,
+            self.slots.len()
+        );
+        let entries: Vec<_> = buffers
+            .iter()
+            .zip(&self.slots)
+            .map(|(b, &i)| wgpu::BindGroupEntry {
+                binding: i,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.name),
+            layout: &self.layout,
+            entries: &entries,
+        });
+        let groups = items.div_ceil(u64::from(WORKGROUP)) as u32;
+        let x = groups.min(MAX_GROUPS_X);
+        let y = groups.div_ceil(x);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(self.name),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+}

@@ -1,0 +1,106 @@
+//! Input preparation shared by both backends: a rendered [`Frame`] becomes
+//! `f32` buffers with every non-finite or out-of-range value replaced and
+//! counted, so no pass ever sees NaN or infinity where it does not expect
+//! one (DESIGN §11: sanitised, counted, never propagated).
+//!
+//! * color: NaN / ±inf channels → 0; the rest is clamped to `[0, 65504]`
+//!   (linear radiance is non-negative, and 65504 is the largest `f16`);
+//! * depth: `+inf` is kept (sky); NaN, `−inf`, zero and negative depths
+//!   become 0, which every pass reads as "no surface";
+//! * motion: NaN / ±inf components → 0, and vectors are clamped to
+//!   ±4 image sizes (beyond that a point left the image anyway).
+
+use protocol::Frame;
+
+/// Largest finite `f16`.
+pub const MAX_RADIANCE: f32 = 65504.0;
+
+/// How many values of each buffer were replaced.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Sanitized {
+    /// Color channels that were non-finite (or negative / above
+    /// [`MAX_RADIANCE`] are clamped silently and not counted).
+    pub color: u64,
+    /// Depths that were NaN, `−inf`, zero or negative.
+    pub depth: u64,
+    /// Motion components that were non-finite.
+    pub motion: u64,
+}
+
+impl Sanitized {
+    /// Total replaced values.
+    pub fn total(&self) -> u64 {
+        self.color + self.depth + self.motion
+    }
+}
+
+/// A rendered frame's buffers as the passes read them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prepared {
+    /// Linear RGB, alpha 1.
+    pub color: Vec<[f32; 4]>,
+    /// Linear depth; 0 = no surface, `+inf` = sky.
+    pub depth: Vec<f32>,
+    /// Motion to the previous frame, pixels.
+    pub motion: Vec<[f32; 2]>,
+    /// Pixels with a surface (depth > 0).
+    pub valid: u64,
+    /// What was replaced.
+    pub sanitized: Sanitized,
+}
+
+/// Converts and sanitises a frame's buffers.
+pub fn prepare(frame: &Frame) -> Prepared {
+    let mut s = Sanitized::default();
+    let color = frame
+        .color
+        .iter()
+        .map(|c| {
+            let mut out = [0.0, 0.0, 0.0, 1.0];
+            for (o, v) in out.iter_mut().zip(c.iter().take(3)) {
+                let v = v.to_f32();
+                if v.is_finite() {
+                    *o = v.clamp(0.0, MAX_RADIANCE);
+                } else {
+                    s.color += 1;
+                }
+            }
+            out
+        })
+        .collect();
+    let depth: Vec<f32> = frame
+        .depth
+        .iter()
+        .map(|&d| {
+            if d > 0.0 {
+                d
+            } else {
+                s.depth += 1;
+                0.0
+            }
+        })
+        .collect();
+    let limit = 4.0 * frame.meta.size.width.max(frame.meta.size.height) as f32;
+    let motion = frame
+        .motion
+        .iter()
+        .map(|m| {
+            m.map(|v| {
+                if v.is_finite() {
+                    v.clamp(-limit, limit)
+                } else {
+                    s.motion += 1;
+                    0.0
+                }
+            })
+        })
+        .collect();
+    let valid = depth.iter().filter(|&&d| d > 0.0).count() as u64;
+    Prepared {
+        color,
+        depth,
+        motion,
+        valid,
+        sanitized: s,
+    }
+}

@@ -1,0 +1,83 @@
+//! The buffers of a generated frame while passes fill it, shared by the CPU
+//! reference and mirrored by the GPU buffers: color, depth, motion and the
+//! per-pixel source mask.
+
+use glam::Vec2;
+
+/// Nothing has written the pixel yet (a hole).
+pub const EMPTY: u32 = 0;
+/// Written by the forward warp (GFFE §4.1).
+pub const WARPED: u32 = 1;
+/// Filled from the background layers (GFFE §4.2).
+pub const BACKGROUND: u32 = 2;
+/// Filled by push-pull: no source had it (DESIGN §4 step 7).
+pub const FILLED: u32 = 3;
+/// Copied from the rendered frame (the `repeat` baseline and window crop).
+pub const COPIED: u32 = 4;
+
+/// Maps a continuous pixel position of the rendered frame to the displayed
+/// region's pixels: `(p − offset) · scale`. The identity for a plain window;
+/// the crop of the adaptive window (DESIGN §4.5) otherwise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DisplayMap {
+    /// Top-left corner of the displayed region in rendered pixels.
+    pub offset: Vec2,
+    /// Displayed pixels per rendered pixel.
+    pub scale: Vec2,
+}
+
+impl DisplayMap {
+    /// The identity map.
+    pub const IDENTITY: DisplayMap = DisplayMap {
+        offset: Vec2::ZERO,
+        scale: Vec2::ONE,
+    };
+
+    /// Applies the map.
+    pub fn apply(&self, p: Vec2) -> Vec2 {
+        (p - self.offset) * self.scale
+    }
+
+    /// As a WGSL `vec4` (offset, scale).
+    pub fn to_array(&self) -> [f32; 4] {
+        [self.offset.x, self.offset.y, self.scale.x, self.scale.y]
+    }
+}
+
+/// A generated frame in the making (CPU reference).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Output {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear RGB, alpha 1 where written.
+    pub color: Vec<[f32; 4]>,
+    /// Linear view depth in the generated frame's camera (`+inf` sky).
+    pub depth: Vec<f32>,
+    /// Motion to the rendered frame it was made from, in displayed pixels.
+    pub motion: Vec<[f32; 2]>,
+    /// Per pixel: [`EMPTY`], [`WARPED`], [`BACKGROUND`], [`FILLED`] or
+    /// [`COPIED`].
+    pub mask: Vec<u32>,
+}
+
+impl Output {
+    /// An all-empty frame.
+    pub fn empty(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            color: vec![[0.0; 4]; n],
+            depth: vec![0.0; n],
+            motion: vec![[0.0; 2]; n],
+            mask: vec![EMPTY; n],
+        }
+    }
+
+    /// Number of pixels with the given mask value.
+    pub fn count(&self, mask: u32) -> usize {
+        self.mask.iter().filter(|&&m| m == mask).count()
+    }
+}

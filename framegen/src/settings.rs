@@ -1,0 +1,161 @@
+//! What a [`crate::FrameGenerator`] does and with which trade-offs; every
+//! field is one of the knobs the `eval` report sweeps (DESIGN §9).
+
+use crate::FramegenError;
+use crate::gffe::background::MAX_LEVELS;
+use crate::gffe::history::MAX_HISTORY;
+
+/// A frame generation method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// Show the last rendered frame again (DESIGN §6).
+    Repeat,
+    /// Camera-only reprojection with depth (timewarp / ASW style): no
+    /// object motion, no background layers; holes are push-pull filled.
+    Reproject,
+    /// G-buffer-free frame extrapolation, GFFE §4.1–4.3.
+    Gffe,
+}
+
+impl Method {
+    /// Every method, baselines first.
+    pub const ALL: [Method; 3] = [Method::Repeat, Method::Reproject, Method::Gffe];
+
+    /// The name used on command lines and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Repeat => "repeat",
+            Method::Reproject => "reproject",
+            Method::Gffe => "gffe",
+        }
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown method {s:?} (repeat, reproject, gffe)"))
+    }
+}
+
+/// Settings of a generator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// The method.
+    pub method: Method,
+    /// Generated frames per rendered frame: α = j / (n + 1), j = 1..=n.
+    pub n: u32,
+    /// History length `k` (GFFE Alg. 1), 2..=8; `gffe` only.
+    pub history: u32,
+    /// Background levels `L` (GFFE §4.2), 0..=4; `gffe` only.
+    pub background_levels: u32,
+    /// Static-test threshold ε in pixels (Alg. 1).
+    pub static_epsilon: f32,
+    /// Relative depth margin for "deeper" in background case 2.
+    pub depth_tolerance: f32,
+    /// Push-pull pyramid levels for the remaining holes (≥ 1; capped at
+    /// the frame's full depth).
+    pub pushpull_levels: u32,
+    /// A frame whose share of dynamic pixels exceeds this is treated as a
+    /// camera cut (history and background restart). > 1 disables it.
+    pub cut_dynamic_fraction: f32,
+    /// Largest α accepted (extrapolating far beyond one interval is the
+    /// scheduler's call, up to this limit).
+    pub max_alpha: f64,
+    /// The displayed size, when the stream's adaptive window keeps the
+    /// rendered size (`KeepSize`); `None` derives it from the window.
+    pub display_size: Option<(u32, u32)>,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            method: Method::Gffe,
+            n: 1,
+            history: 2,
+            background_levels: 2,
+            static_epsilon: 0.5,
+            depth_tolerance: 0.02,
+            pushpull_levels: 7,
+            cut_dynamic_fraction: 0.9,
+            max_alpha: 16.0,
+            display_size: None,
+        }
+    }
+}
+
+impl Settings {
+    /// Settings for `method` with every other value at its default.
+    pub fn for_method(method: Method) -> Self {
+        Self {
+            method,
+            ..Self::default()
+        }
+    }
+
+    /// Checks every range.
+    pub fn validate(&self) -> Result<(), FramegenError> {
+        let bad = |m: String| Err(FramegenError::Settings(m));
+        if !(1..=16).contains(&self.n) {
+            return bad(format!("n = {} must be in 1..=16", self.n));
+        }
+        if !(2..=MAX_HISTORY as u32).contains(&self.history) {
+            return bad(format!(
+                "history k = {} must be in 2..={MAX_HISTORY}",
+                self.history
+            ));
+        }
+        if self.background_levels > MAX_LEVELS {
+            return bad(format!(
+                "background levels L = {} must be at most {MAX_LEVELS}",
+                self.background_levels
+            ));
+        }
+        if !(self.static_epsilon.is_finite() && self.static_epsilon >= 0.0) {
+            return bad("static epsilon must be finite and ≥ 0".into());
+        }
+        if !(self.depth_tolerance.is_finite() && self.depth_tolerance >= 0.0) {
+            return bad("depth tolerance must be finite and ≥ 0".into());
+        }
+        if !(1..=16).contains(&self.pushpull_levels) {
+            return bad("push-pull levels must be in 1..=16".into());
+        }
+        if self.cut_dynamic_fraction.is_nan() {
+            return bad("cut fraction is NaN".into());
+        }
+        if !(self.max_alpha.is_finite() && self.max_alpha > 0.0) {
+            return bad("max α must be finite and > 0".into());
+        }
+        if let Some((w, h)) = self.display_size {
+            protocol::Limits::default()
+                .check_size(w, h)
+                .map_err(|e| FramegenError::Settings(format!("display size: {e}")))?;
+        }
+        Ok(())
+    }
+
+    /// `k` as the passes use it: 1 (no history) for the baselines.
+    pub fn effective_history(&self) -> u32 {
+        match self.method {
+            Method::Gffe => self.history,
+            _ => 1,
+        }
+    }
+
+    /// `L` as the passes use it: 0 for the baselines.
+    pub fn effective_levels(&self) -> u32 {
+        match self.method {
+            Method::Gffe => self.background_levels,
+            _ => 0,
+        }
+    }
+}
