@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use crate::FramegenError;
-use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime};
+use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
 use crate::gffe::{background, bgfill, history, holes, motion, warp, window};
 use crate::input::Prepared;
 use crate::levels::Levels;
@@ -65,6 +65,7 @@ impl Backend for CpuBackend {
                 prev_history,
                 plan.k,
                 plan.epsilon,
+                plan.tolerance,
             )
         });
         let n = frame.depth.len();
@@ -130,6 +131,7 @@ impl Backend for CpuBackend {
                 job.map,
                 &mut out,
             );
+            warp::close_cracks(&mut out);
             out
         });
         if cur.levels.count > 0 && job.bg_target.count == cur.levels.count {
@@ -161,5 +163,13 @@ impl Backend for CpuBackend {
 
     fn name(&self) -> String {
         "cpu".into()
+    }
+
+    fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError> {
+        Ok(self.current.as_ref().map(|c| Snapshot {
+            positions: c.history.positions.clone(),
+            track: c.history.track.clone(),
+            background: c.background.clone(),
+        }))
     }
 }

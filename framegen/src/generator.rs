@@ -96,7 +96,7 @@ pub enum PixelSource {
 impl PixelSource {
     fn from_mask(m: u32) -> Self {
         match m {
-            output::WARPED => PixelSource::Warped,
+            output::WARPED | output::CRACK => PixelSource::Warped,
             output::BACKGROUND => PixelSource::Background,
             output::COPIED => PixelSource::Copied,
             _ => PixelSource::Filled,
@@ -210,6 +210,19 @@ pub trait Backend: Send {
     fn timings(&self) -> Vec<PassTime>;
     /// A name for reports ("cpu", or the GPU adapter).
     fn name(&self) -> String;
+    /// The state the last ingest left (for parity tests and debugging).
+    fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError>;
+}
+
+/// What ingesting a rendered frame produced.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Snapshot {
+    /// `k` planes of history positions.
+    pub positions: Vec<[f32; 4]>,
+    /// Track words.
+    pub track: Vec<u32>,
+    /// Background texels.
+    pub background: Vec<crate::gffe::background::Texel>,
 }
 
 /// What the generator remembers of the last rendered frame.
@@ -284,6 +297,12 @@ impl FrameGenerator {
     /// Pass timings of the last push + generate.
     pub fn timings(&self) -> Vec<PassTime> {
         self.backend.timings()
+    }
+
+    /// The history and background the last push left (parity tests,
+    /// debugging).
+    pub fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError> {
+        self.backend.snapshot()
     }
 
     /// Drops all history (the caller signals a cut).

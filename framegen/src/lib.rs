@@ -10,6 +10,7 @@
 
 pub mod camera;
 pub mod cpu;
+pub mod decimate;
 pub mod generator;
 pub mod gffe;
 pub mod gpu;
@@ -24,11 +25,13 @@ pub mod splat;
 /// contract); re-exported here for the metrics' users.
 pub use protocol::display;
 
+pub use cpu::CpuBackend;
 pub use display::{DisplayImage, display_encode};
 pub use generator::{
-    Backend, CameraSource, FrameGenerator, Generated, Pass, PassTime, PixelSource, PushOutcome,
+    Backend, CameraSource, FrameGenerator, Generated, IngestPlan, Job, Pass, PassTime, PixelSource,
+    PushOutcome, Snapshot,
 };
-pub use gpu::GpuContext;
+pub use gpu::{GpuBackend, GpuContext};
 pub use metrics::{MetricsError, psnr, ssim};
 pub use settings::{Method, Settings};
 

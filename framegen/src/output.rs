@@ -14,6 +14,9 @@ pub const BACKGROUND: u32 = 2;
 pub const FILLED: u32 = 3;
 /// Copied from the rendered frame (the `repeat` baseline and window crop).
 pub const COPIED: u32 = 4;
+/// A one-pixel crack of the forward warp closed from its two warped
+/// neighbours (reported as warped).
+pub const CRACK: u32 = 5;
 
 /// Maps a continuous pixel position of the rendered frame to the displayed
 /// region's pixels: `(p − offset) · scale`. The identity for a plain window;

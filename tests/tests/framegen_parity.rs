@@ -1,47 +1,389 @@
-//! CPU reference vs wgpu, whole pipeline, on rendered hard-case scenes.
+//! CPU reference vs wgpu, per pass and for the whole pipeline, on frames of
+//! the hard-case scenes rendered by the server's renderer (DESIGN §11).
+//!
+//! Tolerances, and why they are not zero: both sides compute in `f32`, but
+//! the shader compiler may fuse multiply-adds and reorder sums, so values
+//! differ in the last bits. Positions are compared to 1e-4 relative; a
+//! pixel whose static test sits exactly on ε, or whose projection sits on a
+//! pixel boundary, can flip, so those counts are bounded (a few per
+//! thousand) rather than zero. The depth test itself is exact: the same
+//! candidates give the same winners, bit for bit.
 
-use framegen::{FrameGenerator, GpuContext, Method, Settings};
-use protocol::FrameSize;
+#![allow(clippy::needless_range_loop)] // pixel loops index several buffers
 
-const SIZE: FrameSize = FrameSize::new(160, 96);
+use framegen::gffe::{holes, warp, window};
+use framegen::splat::{self, Candidate, GpuSplat};
+use framegen::{FrameGenerator, GpuContext, Method, PixelSource, Settings};
+use protocol::{Frame, FrameSize};
+use std::sync::Arc;
 
+const SIZE: FrameSize = FrameSize::new(128, 72);
+
+fn ctx() -> Arc<GpuContext> {
+    GpuContext::new().expect("a wgpu adapter (lavapipe in CI)")
+}
+
+/// 30 fps frames (motion composed from 60 fps renders) of a scene.
+fn frames(scene: &str, start: u64, count: u64) -> Vec<Frame> {
+    let all = tests::render_scene(scene, SIZE, 60.0, start..start + 2 * count);
+    framegen::decimate::decimate(&all, 2)
+}
+
+fn close(a: f32, b: f32, rel: f32) -> bool {
+    a == b || (a - b).abs() <= rel * (1.0 + a.abs().max(b.abs()))
+}
+
+fn pos_close(a: [f32; 4], b: [f32; 4]) -> bool {
+    a[3] == b[3] && (0..3).all(|i| close(a[i], b[i], 1e-4))
+}
+
+/// History tracking and background collection: positions, track words and
+/// background texels after every frame.
 #[test]
-fn smoke_pipeline_parity() {
-    let ctx = GpuContext::new().unwrap();
-    for scene in ["crossing", "pan", "dolly"] {
-        let frames = tests::render_scene(scene, SIZE, 60.0, [10, 12, 14, 16]);
+fn history_and_background_match() {
+    let ctx = ctx();
+    for scene in tests::HARD_CASES {
+        let fs = frames(scene, 30, 5);
+        let s = Settings {
+            history: 3,
+            background_levels: 3,
+            ..Settings::default()
+        };
+        let mut cpu = FrameGenerator::cpu(s).unwrap();
+        let mut gpu = FrameGenerator::gpu(s, ctx.clone()).unwrap();
+        for f in &fs {
+            assert_eq!(cpu.push(f).unwrap(), gpu.push(f).unwrap(), "{scene}");
+            let a = cpu.snapshot().unwrap().unwrap();
+            let b = gpu.snapshot().unwrap().unwrap();
+            let n = a.track.len();
+            let track_diff = a.track.iter().zip(&b.track).filter(|(x, y)| x != y).count();
+            let pos_diff = a
+                .positions
+                .iter()
+                .zip(&b.positions)
+                .filter(|(x, y)| !pos_close(**x, **y))
+                .count();
+            let bg_valid = a
+                .background
+                .iter()
+                .zip(&b.background)
+                .filter(|(x, y)| x.is_valid() != y.is_valid())
+                .count();
+            let bg_pos = a
+                .background
+                .iter()
+                .zip(&b.background)
+                .filter(|(x, y)| x.is_valid() && y.is_valid() && !pos_close(x.pos, y.pos))
+                .count();
+            eprintln!(
+                "{scene}: track {track_diff} positions {pos_diff} bg valid {bg_valid} bg pos {bg_pos} of {n}"
+            );
+            // Boundary flips only: at most 0.5 % of the pixels.
+            let bound = n / 200 + 2;
+            assert!(
+                track_diff <= bound,
+                "{scene}: {track_diff} track words differ"
+            );
+            assert!(
+                pos_diff <= 3 * bound,
+                "{scene}: {pos_diff} positions differ"
+            );
+            assert!(
+                bg_valid <= 2 * bound,
+                "{scene}: {bg_valid} background slots differ"
+            );
+            assert!(
+                bg_pos <= 2 * bound,
+                "{scene}: {bg_pos} background positions differ"
+            );
+        }
+    }
+}
+
+/// The depth test is exact: GPU splat of the same candidates picks the same
+/// winners as the CPU reference, including ties and sky.
+#[test]
+fn splat_winners_are_exact() {
+    let ctx = ctx();
+    let fs = frames("default", 40, 1);
+    let f = &fs[0];
+    let prepared = framegen::input::prepare(f);
+    let cam =
+        framegen::camera::PassCamera::new(&f.meta.camera, f.meta.size, f.meta.camera.pose.position);
+    let positions: Vec<[f32; 4]> = (0..prepared.depth.len())
+        .map(|i| {
+            let d = prepared.depth[i];
+            if d > 0.0 {
+                cam.unproject(framegen::camera::pixel_center(i, SIZE.width), d)
+            } else {
+                [0.0, 0.0, 0.0, -1.0]
+            }
+        })
+        .collect();
+    // A target camera turned and moved a little; plus duplicated candidates
+    // to force exact ties.
+    let mut target_cam = f.meta.camera;
+    target_cam.pose.position += glam::DVec3::new(0.3, 0.1, -0.4);
+    target_cam.pose.rotation *= glam::DQuat::from_rotation_y(0.05);
+    let target = framegen::camera::PassCamera::new(&target_cam, SIZE, f.meta.camera.pose.position);
+    let mut cands = warp::project(&positions, &target);
+    cands.extend_from_slice(&cands.clone()[..500]);
+    cands.push(Candidate::MISS);
+    let slots = SIZE.pixels() as usize;
+    let cpu = splat::resolve(&cands, slots);
+    let splat = GpuSplat::new(&ctx);
+    let cbuf = ctx.storage_init("cands", bytemuck::cast_slice(&cands));
+    let keys = ctx.storage("keys", slots as u64 * 4);
+    let winners = ctx.storage("winners", slots as u64 * 4);
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    splat.encode(
+        &ctx,
+        &mut enc,
+        &cbuf,
+        cands.len() as u64,
+        &keys,
+        &winners,
+        slots as u64,
+    );
+    ctx.queue.submit([enc.finish()]);
+    let gpu_keys: Vec<u32> = ctx.read_pod(&keys, slots).unwrap();
+    let gpu_stored: Vec<u32> = ctx.read_pod(&winners, slots).unwrap();
+    assert_eq!(gpu_keys, cpu.keys);
+    assert_eq!(gpu_stored, cpu.stored);
+    assert!(cpu.stored.iter().filter(|&&s| s != 0).count() > slots / 2);
+}
+
+/// The warp's projection: same landing slot and depth for nearly every
+/// pixel (boundary flips bounded).
+#[test]
+fn warp_projection_matches() {
+    let ctx = ctx();
+    let gw = warp::GpuWarp::new(&ctx);
+    for scene in ["pan", "huge", "sky", "fast_rotation"] {
+        let fs = frames(scene, 30, 2);
+        let f = &fs[1];
+        let origin = f.meta.camera.pose.position;
+        let cam = framegen::camera::PassCamera::new(&f.meta.camera, f.meta.size, origin);
+        let prepared = framegen::input::prepare(f);
+        let next: Vec<[f32; 4]> = (0..prepared.depth.len())
+            .map(|i| {
+                let d = prepared.depth[i];
+                if d > 0.0 {
+                    cam.unproject(framegen::camera::pixel_center(i, SIZE.width), d)
+                } else {
+                    [0.0, 0.0, 0.0, -1.0]
+                }
+            })
+            .collect();
+        let target_pose =
+            protocol::Pose::extrapolate(&fs[0].meta.camera.pose, &f.meta.camera.pose, 0.5);
+        let mut tc = f.meta.camera;
+        tc.pose = target_pose;
+        let target = framegen::camera::PassCamera::new(&tc, SIZE, origin);
+        let cpu = warp::project(&next, &target);
+        let nbuf = ctx.storage_init("next", bytemuck::cast_slice(&next));
+        let cbuf = ctx.storage("cands", next.len() as u64 * 8);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        gw.encode_project(&ctx, &mut enc, &target, &nbuf, next.len() as u32, &cbuf);
+        ctx.queue.submit([enc.finish()]);
+        let gpu: Vec<Candidate> = ctx.read_pod(&cbuf, next.len()).unwrap();
+        let slot_diff = cpu
+            .iter()
+            .zip(&gpu)
+            .filter(|(a, b)| a.slot != b.slot)
+            .count();
+        eprintln!("{scene}: {slot_diff} slots differ of {}", next.len());
+        let depth_diff = cpu
+            .iter()
+            .zip(&gpu)
+            .filter(|(a, b)| a.slot == b.slot && a.slot != splat::NONE)
+            .filter(|(a, b)| !close(splat::key_depth(a.key), splat::key_depth(b.key), 1e-5))
+            .count();
+        assert!(
+            slot_diff <= next.len() / 200 + 2,
+            "{scene}: {slot_diff} slots differ"
+        );
+        assert_eq!(depth_diff, 0, "{scene}: depths differ");
+    }
+}
+
+/// Push-pull on a frame with large holes.
+#[test]
+fn push_pull_matches() {
+    let ctx = ctx();
+    let gh = holes::GpuHoles::new(&ctx);
+    let fs = frames("crossing", 30, 1);
+    let p = framegen::input::prepare(&fs[0]);
+    let mut out = framegen::output::Output::empty(SIZE.width, SIZE.height);
+    for t in 0..out.mask.len() {
+        // Keep a checker of 8x8 blocks and a big empty rectangle.
+        let (x, y) = (t as u32 % SIZE.width, t as u32 / SIZE.width);
+        let hole = ((x / 8 + y / 8) % 3 == 0) || (x > 70 && y > 20);
+        if !hole {
+            out.color[t] = p.color[t];
+            out.depth[t] = p.depth[t].max(1e-3);
+            out.motion[t] = [x as f32 * 0.01, -1.0];
+            out.mask[t] = framegen::output::WARPED;
+        }
+    }
+    for levels in [1, 3, 7] {
+        let mut cpu = out.clone();
+        holes::fill(&mut cpu, levels);
+        let layout = holes::layout(SIZE.width, SIZE.height, levels);
+        let n = out.mask.len();
+        let c = ctx.storage_init("c", bytemuck::cast_slice(&out.color));
+        let d = ctx.storage_init("d", bytemuck::cast_slice(&out.depth));
+        let m = ctx.storage_init("m", bytemuck::cast_slice(&out.motion));
+        let k = ctx.storage_init("k", bytemuck::cast_slice(&out.mask));
+        let pyr = ctx.storage("p", u64::from(layout.total()) * 32);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        let o = warp::GpuOutput {
+            color: &c,
+            depth: &d,
+            motion: &m,
+            mask: &k,
+        };
+        gh.encode(&ctx, &mut enc, o, &pyr, layout);
+        ctx.queue.submit([enc.finish()]);
+        let color: Vec<[f32; 4]> = ctx.read_pod(&c, n).unwrap();
+        let depth: Vec<f32> = ctx.read_pod(&d, n).unwrap();
+        let mask: Vec<u32> = ctx.read_pod(&k, n).unwrap();
+        assert_eq!(mask, cpu.mask, "levels {levels}");
+        for t in 0..n {
+            for ch in 0..3 {
+                assert!(
+                    close(color[t][ch], cpu.color[t][ch], 1e-4),
+                    "levels {levels} pixel {t}"
+                );
+            }
+            assert!(close(depth[t], cpu.depth[t], 1e-4) || depth[t] == cpu.depth[t]);
+        }
+    }
+}
+
+/// The window crop (and resample) of a widened frame.
+#[test]
+fn crop_matches() {
+    let ctx = ctx();
+    let gc = window::GpuCrop::new(&ctx);
+    let fs = frames("pan", 30, 1);
+    let p = framegen::input::prepare(&fs[0]);
+    for (origin, extent, output) in [
+        (
+            glam::Vec2::new(0.0, 0.0),
+            glam::Vec2::new(128.0, 72.0),
+            (128, 72),
+        ),
+        (
+            glam::Vec2::new(10.0, 4.0),
+            glam::Vec2::new(100.0, 60.0),
+            (128, 72),
+        ),
+        (
+            glam::Vec2::new(7.0, 3.0),
+            glam::Vec2::new(110.0, 62.0),
+            (110, 62),
+        ),
+    ] {
+        let c = window::Crop {
+            source: (SIZE.width, SIZE.height),
+            origin,
+            extent,
+            output,
+        };
+        let cpu = window::crop(&p.color, &p.depth, &p.motion, &c);
+        let n = cpu.mask.len();
+        let bufs: Vec<_> = [
+            bytemuck::cast_slice::<_, u8>(&p.color).to_vec(),
+            bytemuck::cast_slice::<_, u8>(&p.depth).to_vec(),
+            bytemuck::cast_slice::<_, u8>(&p.motion).to_vec(),
+        ]
+        .iter()
+        .map(|b| ctx.storage_init("in", b))
+        .collect();
+        let oc = ctx.storage("oc", n as u64 * 16);
+        let od = ctx.storage("od", n as u64 * 4);
+        let om = ctx.storage("om", n as u64 * 8);
+        let ok = ctx.storage("ok", n as u64 * 4);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        gc.encode(
+            &ctx,
+            &mut enc,
+            &c,
+            &bufs[0],
+            &bufs[1],
+            &bufs[2],
+            warp::GpuOutput {
+                color: &oc,
+                depth: &od,
+                motion: &om,
+                mask: &ok,
+            },
+        );
+        ctx.queue.submit([enc.finish()]);
+        let color: Vec<[f32; 4]> = ctx.read_pod(&oc, n).unwrap();
+        let depth: Vec<f32> = ctx.read_pod(&od, n).unwrap();
+        let mask: Vec<u32> = ctx.read_pod(&ok, n).unwrap();
+        assert_eq!(mask, cpu.mask);
+        assert_eq!(depth, cpu.depth);
+        for t in 0..n {
+            for ch in 0..3 {
+                assert!(close(color[t][ch], cpu.color[t][ch], 1e-4));
+            }
+        }
+    }
+}
+
+/// The whole pipeline, every method, every hard case, α = 0.5 and 2.
+#[test]
+fn whole_pipeline_matches() {
+    let ctx = ctx();
+    for scene in tests::HARD_CASES {
+        let fs = frames(scene, 30, 4);
         for method in Method::ALL {
             let s = Settings::for_method(method);
             let mut cpu = FrameGenerator::cpu(s).unwrap();
             let mut gpu = FrameGenerator::gpu(s, ctx.clone()).unwrap();
-            for f in &frames {
-                let a = cpu.push(f).unwrap();
-                let b = gpu.push(f).unwrap();
-                assert_eq!(a, b, "{scene} {method}");
+            for f in &fs {
+                assert_eq!(
+                    cpu.push(f).unwrap(),
+                    gpu.push(f).unwrap(),
+                    "{scene} {method}"
+                );
             }
-            let a = cpu.generate(0.5).unwrap();
-            let b = gpu.generate(0.5).unwrap();
-            let mask_diff = a.mask.iter().zip(&b.mask).filter(|(x, y)| x != y).count();
-            let color_diff = a
-                .output
-                .color
-                .iter()
-                .zip(&b.output.color)
-                .map(|(x, y)| (0..3).map(|c| (x[c] - y[c]).abs()).fold(0f32, f32::max))
-                .fold(0f32, f32::max);
-            let depth_diff = a
-                .output
-                .depth
-                .iter()
-                .zip(&b.output.depth)
-                .filter(|(x, y)| x != y)
-                .count();
-            eprintln!(
-                "{scene} {method}: mask diff {mask_diff}, max color diff {color_diff}, depth diff {depth_diff}, warped {} bg {} filled {}",
-                a.count(framegen::PixelSource::Warped),
-                a.count(framegen::PixelSource::Background),
-                a.count(framegen::PixelSource::Filled)
-            );
+            for alpha in [0.5, 2.0] {
+                let a = cpu.generate(alpha).unwrap();
+                let b = gpu.generate(alpha).unwrap();
+                let n = a.mask.len();
+                let mask_diff = a.mask.iter().zip(&b.mask).filter(|(x, y)| x != y).count();
+                // A pixel counts as different when its color differs by more
+                // than 1e-3 relative (one flipped winner or static test
+                // changes a few pixels and, through push-pull, their
+                // neighbourhood a little).
+                let color_diff = (0..n)
+                    .filter(|&t| {
+                        (0..3).any(|c| !close(a.output.color[t][c], b.output.color[t][c], 1e-3))
+                    })
+                    .count();
+                let bound = n / 100 + 2;
+                eprintln!(
+                    "{scene} {method} α={alpha}: mask diff {mask_diff}, color diff {color_diff} of {n}"
+                );
+                assert!(
+                    mask_diff <= bound,
+                    "{scene} {method} α={alpha}: {mask_diff} mask pixels differ"
+                );
+                assert!(
+                    color_diff <= 2 * bound,
+                    "{scene} {method} α={alpha}: {color_diff} colors differ"
+                );
+                if method != Method::Repeat {
+                    assert!(
+                        a.count(PixelSource::Warped) > n / 2,
+                        "{scene} {method}: warp covered too little"
+                    );
+                }
+            }
         }
     }
 }

@@ -4,8 +4,8 @@
 //! has ¼ the pixels of level `l`, all over the current rendered frame's
 //! image. For each rendered frame:
 //!
-//! 1. the frame's **static** fragments (track word not dynamic, see
-//!    `history.rs`) fill level 0;
+//! 1. the frame's **confirmed static** fragments (see `history.rs`: static
+//!    and seen at the same place by the previous frame) fill level 0;
 //! 2. for `l = 0..L`, every fragment of the previous buffer's level `l` is
 //!    reprojected into the current camera:
 //!    * **case 1**: the same level is empty there → candidate for `B_l`;
@@ -29,7 +29,7 @@
 use glam::Vec3;
 
 use crate::camera::{PassCamera, W_INVALID, cell, rebase};
-use crate::gffe::history::is_dynamic;
+use crate::gffe::history::{is_confirmed, is_dynamic};
 use crate::gpu::{Binding, GpuContext, Kernel};
 use crate::levels::Levels;
 use crate::splat::{self, Candidate, depth_key};
@@ -65,15 +65,15 @@ pub struct PrevBackground<'a> {
     pub texels: &'a [Texel],
 }
 
-/// CPU reference of step 1: level 0 from the static fragments; the other
-/// levels empty.
+/// CPU reference of step 1: level 0 from the confirmed static fragments;
+/// the other levels empty.
 pub fn init(p0: &[[f32; 4]], track: &[u32], color: &[[f32; 4]], levels: Levels) -> Vec<Texel> {
     let mut bg = vec![Texel::default(); levels.total() as usize];
     if levels.count == 0 {
         return bg;
     }
     for (x, slot) in bg.iter_mut().take(levels.len(0) as usize).enumerate() {
-        if !is_dynamic(track[x]) && p0[x][3] != W_INVALID {
+        if !is_dynamic(track[x]) && is_confirmed(track[x]) && p0[x][3] != W_INVALID {
             let c = color[x];
             *slot = Texel {
                 pos: p0[x],

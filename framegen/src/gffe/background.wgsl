@@ -31,7 +31,7 @@ fn bg_init(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         return;
     }
     let p = positions[x];
-    if (track[x] & 1u) == 0u && p.w != W_INVALID {
+    if (track[x] & 3u) == 2u && p.w != W_INVALID {
         bg[x] = BgTexel(p, vec4<f32>(color[x].xyz, 1.0));
     }
 }

@@ -11,13 +11,21 @@
 //!
 //! Choices the paper leaves open, made here:
 //! * `x'` reads the previous history at the pixel containing it (nearest).
-//! * The **track word** of a pixel is `dynamic | chain << 1`, where `chain`
-//!   counts how many of `P_1..P_{k−1}` are real history: a static pixel's
+//! * The **track word** of a pixel is `dynamic | confirmed << 1 |
+//!   chain << 2`, where `chain` counts how many of `P_1..P_{k−1}` are real
+//!   history: a static pixel's
 //!   entries all hold its (static) position, so its chain is `k − 1`; a
 //!   dynamic pixel extends the chain found at `x'` by one; a trajectory
 //!   that leaves the previous image, meets an empty pixel, or switches
 //!   between a point and a sky direction ends there and the remaining
 //!   entries repeat the last real one (zero velocity, never garbage).
+//! * **Confirmed** static pixels may enter the background layers
+//!   (`background.rs`). The static test only compares screen positions, so
+//!   a point moving along its view ray (an object coming straight at the
+//!   camera) passes it, and would leave a ghost of the object in the
+//!   background. A static pixel is confirmed when the previous frame's
+//!   position at `x'`, seen from the current camera, lands in a pixel whose
+//!   depth agrees with it within the relative `tolerance`.
 //! * Invalid depth (sanitised NaN / ≤ 0) gives no position at all.
 //! * Without a previous frame (first frame, cut, reset) every pixel is
 //!   static.
@@ -27,7 +35,7 @@
 
 use glam::Vec2;
 
-use crate::camera::{PassCamera, W_INVALID, cell, pixel_center, rebase};
+use crate::camera::{PassCamera, W_DIRECTION, W_INVALID, cell, pixel_center, rebase};
 use crate::gpu::{Binding, GpuContext, Kernel};
 
 /// The previous rendered frame's history, as the current frame sees it.
@@ -46,7 +54,7 @@ pub struct PrevHistory<'a> {
 pub struct History {
     /// `k` planes of positions, plane `i` = `P_i`.
     pub positions: Vec<[f32; 4]>,
-    /// Per pixel `dynamic | chain << 1`.
+    /// Per pixel `dynamic | confirmed << 1 | chain << 2`.
     pub track: Vec<u32>,
     /// Number of pixels that failed the static test.
     pub dynamic: u32,
@@ -57,14 +65,20 @@ pub fn is_dynamic(track: u32) -> bool {
     track & 1 == 1
 }
 
+/// Whether a static pixel was confirmed by the previous frame (may enter
+/// the background).
+pub fn is_confirmed(track: u32) -> bool {
+    track & 2 == 2
+}
+
 /// How many of `P_1..` are real history.
 pub fn chain(track: u32) -> u32 {
-    track >> 1
+    track >> 2
 }
 
 #[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
 /// CPU reference of Algorithm 1. `camera` is `C_t` with its centre at the
-/// origin; `k ≥ 1`; `epsilon` in pixels.
+/// origin; `k ≥ 1`; `epsilon` in pixels; `tolerance` relative depth.
 pub fn track(
     camera: &PassCamera,
     depth: &[f32],
@@ -72,6 +86,7 @@ pub fn track(
     prev: Option<PrevHistory<'_>>,
     k: u32,
     epsilon: f32,
+    tolerance: f32,
 ) -> History {
     let n = depth.len();
     let k = (k as usize).clamp(1, MAX_HISTORY);
@@ -88,7 +103,7 @@ pub fn track(
         let center = pixel_center(x, width);
         let p = camera.unproject(center, d);
         let mut entries = [p; MAX_HISTORY];
-        let mut word = ((k - 1) as u32) << 1;
+        let mut word = ((k - 1) as u32) << 2;
         if let Some(prev) = &prev {
             let target = center + Vec2::from_array(motion[x]);
             let reprojected = prev.camera.project(p);
@@ -96,11 +111,25 @@ pub fn track(
                 let e = r.pixel - target;
                 e.x * e.x + e.y * e.y <= epsilon * epsilon
             });
+            let found =
+                cell(target, prev.camera.width(), prev.camera.height(), 1.0).map(|j| j as usize);
+            if is_static && let Some(j) = found {
+                let q = rebase(prev.positions[j], shift(prev));
+                let agrees = q[3] == p[3]
+                    && (q[3] == W_DIRECTION
+                        || camera.project(q).is_some_and(|r| {
+                            cell(r.pixel, width, camera.height(), 1.0).is_some_and(|y| {
+                                let dy = depth[y as usize];
+                                (r.depth - dy).abs() <= tolerance * dy
+                            })
+                        }));
+                if agrees {
+                    word |= 2;
+                }
+            }
             if !is_static {
                 dynamic += 1;
                 let prev_n = prev.track.len();
-                let found = cell(target, prev.camera.width(), prev.camera.height(), 1.0)
-                    .map(|j| j as usize);
                 let mut len = 0usize;
                 if let Some(j) = found {
                     let prev_word = prev.track[j];
@@ -122,7 +151,7 @@ pub fn track(
                 for i in len + 1..k {
                     entries[i] = entries[i - 1];
                 }
-                word = 1 | (len as u32) << 1;
+                word = 1 | (len as u32) << 2;
             }
         }
         for (i, e) in entries.iter().take(k).enumerate() {
@@ -153,7 +182,7 @@ struct Params {
     sizes: [u32; 4],
     /// k, has_prev, 0, 0
     config: [u32; 4],
-    /// epsilon, 0, 0, 0
+    /// epsilon, tolerance, 0, 0
     epsilon: [f32; 4],
 }
 
@@ -204,6 +233,7 @@ impl GpuHistory {
         dynamic: &wgpu::Buffer,
         k: u32,
         epsilon: f32,
+        tolerance: f32,
     ) {
         let (w, h) = (camera.width(), camera.height());
         let (prev_cam, pw, ph) = match &prev {
@@ -215,7 +245,7 @@ impl GpuHistory {
             prev: prev_cam,
             sizes: [w, h, pw, ph],
             config: [k.max(1), u32::from(prev.is_some()), 0, 0],
-            epsilon: [epsilon, 0.0, 0.0, 0.0],
+            epsilon: [epsilon, tolerance, 0.0, 0.0],
         }));
         // Unused previous buffers are bound to placeholders of this frame's
         // own (read-only bindings cannot alias the written ones).

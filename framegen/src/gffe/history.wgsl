@@ -36,8 +36,9 @@ fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     }
     let center = vec2<f32>(f32(x % w) + 0.5, f32(x / w) + 0.5);
     let p = unproject(hp.cur, center, d);
-    var word = (k - 1u) << 1u;
+    var word = (k - 1u) << 2u;
     var len = k - 1u;
+    var is_static = true;
     var last = p;
     positions[x] = p;
     if hp.config.y == 1u {
@@ -45,17 +46,41 @@ fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         let r = project(hp.prev, p);
         let e = r.pixel - target_px;
         let eps = hp.epsilon.x;
-        let is_static = r.ok && e.x * e.x + e.y * e.y <= eps * eps;
+        is_static = r.ok && e.x * e.x + e.y * e.y <= eps * eps;
+        let j = cell(target_px, hp.sizes.z, hp.sizes.w, 1.0);
+        if is_static && j != NONE {
+            var q = prev_positions[j];
+            if q.w > 0.5 {
+                q = vec4<f32>(q.xyz + hp.prev.eye.xyz, q.w);
+            }
+            var agrees = false;
+            if q.w == p.w {
+                if q.w == W_DIRECTION {
+                    agrees = true;
+                } else {
+                    let rq = project(hp.cur, q);
+                    if rq.ok {
+                        let y = cell(rq.pixel, w, hp.sizes.y, 1.0);
+                        if y != NONE {
+                            let dy = depth[y];
+                            agrees = abs(rq.depth - dy) <= hp.epsilon.y * dy;
+                        }
+                    }
+                }
+            }
+            if agrees {
+                word = word | 2u;
+            }
+        }
         if !is_static {
             atomicAdd(&dynamic_count[0], 1u);
             len = 0u;
             let pn = hp.sizes.z * hp.sizes.w;
-            let j = cell(target_px, hp.sizes.z, hp.sizes.w, 1.0);
             if j != NONE {
                 let prev_word = prev_track[j];
                 var available = k - 1u;
                 if (prev_word & 1u) == 1u {
-                    available = (prev_word >> 1u) + 1u;
+                    available = (prev_word >> 2u) + 1u;
                 }
                 let limit = min(available, k - 1u);
                 for (var i = 1u; i <= limit; i++) {
@@ -71,10 +96,10 @@ fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
                     len = i;
                 }
             }
-            word = 1u | (len << 1u);
+            word = 1u | (len << 2u);
         }
     }
-    if word == ((k - 1u) << 1u) {
+    if is_static {
         // Static: every entry is p.
         for (var i = 1u; i < k; i++) {
             positions[i * n + x] = p;

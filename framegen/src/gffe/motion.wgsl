@@ -19,7 +19,7 @@ fn estimate(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg:
     }
     let k = mp.config.y;
     let word = track[x];
-    let m = word >> 1u;
+    let m = word >> 2u;
     let p0 = positions[x];
     var np = p0;
     if (word & 1u) == 1u && m > 0u && m < k && p0.w == W_POINT {

@@ -7,10 +7,20 @@
 //! motion vector pointing to where the source pixel is in the rendered
 //! frame's displayed region (DESIGN §4: generated motion points from the
 //! generated frame to the frame it was made from).
+//!
+//! **Cracks.** Splatting one pixel per source leaves one-pixel gaps where a
+//! surface is magnified. Left alone, the background layers would fill such
+//! a gap inside a foreground object with what lies *behind* it. A hole
+//! whose two opposite neighbours (left/right, up/down, or either diagonal
+//! pair) were both warped at depths within [`CRACK_DEPTH_RATIO`] of each
+//! other is a crack, not a disocclusion: `warp_cracks` closes it with the
+//! mean of the first such pair. It reads only pixels the splat wrote
+//! ([`WARPED`]) and writes only holes ([`CRACK`]), so it is
+//! order-independent.
 
 use crate::camera::{PassCamera, cell, pixel_center};
 use crate::gpu::{Binding, GpuContext, Kernel};
-use crate::output::{DisplayMap, Output, WARPED};
+use crate::output::{CRACK, DisplayMap, EMPTY, Output, WARPED};
 use crate::splat::{Candidate, Winners, depth_key};
 
 /// CPU reference of `warp_project`: one candidate per source pixel.
@@ -53,6 +63,55 @@ pub fn resolve(
     }
 }
 
+/// Largest ratio between the depths of a crack's two neighbours.
+pub const CRACK_DEPTH_RATIO: f32 = 1.1;
+
+/// The neighbour pairs a crack is closed from, in the order they are tried.
+const PAIRS: [[(i32, i32); 2]; 4] = [
+    [(-1, 0), (1, 0)],
+    [(0, -1), (0, 1)],
+    [(-1, -1), (1, 1)],
+    [(1, -1), (-1, 1)],
+];
+
+/// CPU reference of `warp_cracks`.
+pub fn close_cracks(out: &mut Output) {
+    let (w, h) = (out.width as i32, out.height as i32);
+    let before = out.mask.clone();
+    for t in 0..before.len() {
+        if before[t] != EMPTY {
+            continue;
+        }
+        let (x, y) = ((t as i32) % w, (t as i32) / w);
+        for pair in PAIRS {
+            let [a, b] = pair.map(|(dx, dy)| {
+                let (nx, ny) = (x + dx, y + dy);
+                (nx >= 0 && ny >= 0 && nx < w && ny < h).then(|| (ny * w + nx) as usize)
+            });
+            let (Some(a), Some(b)) = (a, b) else { continue };
+            if before[a] != WARPED || before[b] != WARPED {
+                continue;
+            }
+            let (da, db) = (out.depth[a], out.depth[b]);
+            if da.max(db) > da.min(db) * CRACK_DEPTH_RATIO {
+                continue;
+            }
+            let (ca, cb) = (out.color[a], out.color[b]);
+            let (ma, mb) = (out.motion[a], out.motion[b]);
+            out.color[t] = [
+                (ca[0] + cb[0]) * 0.5,
+                (ca[1] + cb[1]) * 0.5,
+                (ca[2] + cb[2]) * 0.5,
+                1.0,
+            ];
+            out.depth[t] = (da + db) * 0.5;
+            out.motion[t] = [(ma[0] + mb[0]) * 0.5, (ma[1] + mb[1]) * 0.5];
+            out.mask[t] = CRACK;
+            break;
+        }
+    }
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
@@ -67,6 +126,7 @@ struct Params {
 pub struct GpuWarp {
     project: Kernel,
     resolve: Kernel,
+    cracks: Kernel,
 }
 
 /// The generated frame's buffers on the GPU.
@@ -102,6 +162,14 @@ impl GpuWarp {
                     Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
                 ],
             ),
+            cracks: Kernel::new(
+                ctx,
+                src,
+                "warp_cracks",
+                &[
+                    Uniform, Skip, Skip, Skip, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                ],
+            ),
         }
     }
 
@@ -134,7 +202,7 @@ impl GpuWarp {
             .dispatch(ctx, encoder, &[&params, next, candidates], u64::from(n));
     }
 
-    /// Records `warp_resolve` over the target pixels.
+    /// Records `warp_resolve` and `warp_cracks` over the target pixels.
     #[allow(clippy::too_many_arguments)]
     pub fn encode_resolve(
         &self,
@@ -149,13 +217,20 @@ impl GpuWarp {
         out: GpuOutput<'_>,
     ) {
         let params = Self::params(ctx, target, 0, source_width, map);
+        let pixels = u64::from(target.width()) * u64::from(target.height());
         self.resolve.dispatch(
             ctx,
             encoder,
             &[
                 &params, color, keys, winners, out.color, out.depth, out.motion, out.mask,
             ],
-            u64::from(target.width()) * u64::from(target.height()),
+            pixels,
+        );
+        self.cracks.dispatch(
+            ctx,
+            encoder,
+            &[&params, out.color, out.depth, out.motion, out.mask],
+            pixels,
         );
     }
 }

@@ -1,6 +1,9 @@
 // Forward warp: project next positions, then resolve the splat winners.
 // See `warp.rs`. Bindings are shared by both entry points.
 
+// Mirrors `warp.rs` CRACK_DEPTH_RATIO.
+const CRACK_DEPTH_RATIO: f32 = 1.1;
+
 struct WarpParams {
     view: Cam,
     sizes: vec4<u32>,
@@ -58,4 +61,50 @@ fn warp_resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) 
     out_depth[t] = key_depth(keys[t]);
     out_motion[t] = disp - center;
     out_mask[t] = WARPED_MASK;
+}
+
+@compute @workgroup_size(256)
+fn warp_cracks(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let t = thread_index(wid, nwg, lid);
+    let w = i32(wp.sizes.y);
+    let h = i32(wp.sizes.z);
+    if t >= wp.sizes.y * wp.sizes.z || out_mask[t] != EMPTY_MASK {
+        return;
+    }
+    let x = i32(t) % w;
+    let y = i32(t) / w;
+    // Pairs of opposite neighbours, in the order of `warp.rs` PAIRS.
+    var pairs = array<vec4<i32>, 4>(
+        vec4<i32>(-1, 0, 1, 0),
+        vec4<i32>(0, -1, 0, 1),
+        vec4<i32>(-1, -1, 1, 1),
+        vec4<i32>(1, -1, -1, 1),
+    );
+    for (var p = 0; p < 4; p++) {
+        let q = pairs[p];
+        let ax = x + q.x;
+        let ay = y + q.y;
+        let bx = x + q.z;
+        let by = y + q.w;
+        if ax < 0 || ay < 0 || ax >= w || ay >= h || bx < 0 || by < 0 || bx >= w || by >= h {
+            continue;
+        }
+        let a = u32(ay * w + ax);
+        let b = u32(by * w + bx);
+        if out_mask[a] != WARPED_MASK || out_mask[b] != WARPED_MASK {
+            continue;
+        }
+        let da = out_depth[a];
+        let db = out_depth[b];
+        if max(da, db) > min(da, db) * CRACK_DEPTH_RATIO {
+            continue;
+        }
+        let ca = out_color[a];
+        let cb = out_color[b];
+        out_color[t] = vec4<f32>((ca.xyz + cb.xyz) * 0.5, 1.0);
+        out_depth[t] = (da + db) * 0.5;
+        out_motion[t] = (out_motion[a] + out_motion[b]) * 0.5;
+        out_mask[t] = CRACK_MASK;
+        return;
+    }
 }

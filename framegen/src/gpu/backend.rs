@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use crate::FramegenError;
 use crate::camera::PassCamera;
-use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime};
+use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
 use crate::gffe::background::{GpuBackground, Texel as BgTexel};
 use crate::gffe::bgfill::GpuBgFill;
 use crate::gffe::history::{GpuHistory, GpuHistoryBuffers};
@@ -298,6 +298,7 @@ impl Backend for GpuBackend {
                 &dynamic,
                 plan.k,
                 plan.epsilon,
+                plan.tolerance,
             );
         })?;
         rec.pass(Pass::Background, |enc| {
@@ -496,6 +497,25 @@ impl Backend for GpuBackend {
 
     fn timings(&self) -> Vec<PassTime> {
         self.timings.clone()
+    }
+
+    fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError> {
+        let Some(c) = &self.current else {
+            return Ok(None);
+        };
+        let n = c.n as usize;
+        Ok(Some(Snapshot {
+            positions: bytemuck::cast_slice::<f32, [f32; 4]>(
+                &self
+                    .ctx
+                    .read_pod::<f32>(&c.positions, n * c.k as usize * 4)?,
+            )
+            .to_vec(),
+            track: self.ctx.read_pod(&c.track, n)?,
+            background: self
+                .ctx
+                .read_pod(&c.background, c.levels.total() as usize)?,
+        }))
     }
 
     fn name(&self) -> String {

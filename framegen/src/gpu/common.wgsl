@@ -114,3 +114,4 @@ const WARPED_MASK: u32 = 1u;
 const BACKGROUND_MASK: u32 = 2u;
 const FILLED_MASK: u32 = 3u;
 const COPIED_MASK: u32 = 4u;
+const CRACK_MASK: u32 = 5u;
