@@ -1,0 +1,133 @@
+//! Per-pass times of the GFFE pipeline (and the baselines' totals) on the
+//! CPU reference and on wgpu, at 720p on the default scene.
+//!
+//! wgpu times are wall time of submit + wait per pass (the profiled
+//! backend); lavapipe's timestamp queries report ~0 for real work. The
+//! `copy` entry is a device buffer copy of the bytes a frame's inputs take
+//! (color f32x4 + depth + motion, 28 B/px): the bandwidth floor each pass
+//! can be compared with.
+//!
+//! `cargo bench -p tests --bench framegen [-- FILTER]`; `FRAMEGEN_BENCH_SIZE=1280x720` by default.
+
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use framegen::{FrameGenerator, GpuBackend, GpuContext, Method, Pass, Settings};
+use protocol::{Frame, FrameSize};
+
+fn size() -> FrameSize {
+    let s = std::env::var("FRAMEGEN_BENCH_SIZE").unwrap_or_else(|_| "1280x720".into());
+    let (w, h) = s.split_once('x').expect("WIDTHxHEIGHT");
+    FrameSize::new(w.parse().expect("width"), h.parse().expect("height"))
+}
+
+/// Fed frames with times that keep increasing when the sequence wraps.
+struct Feed {
+    frames: Vec<Frame>,
+    next: usize,
+}
+
+impl Feed {
+    fn next(&mut self) -> Frame {
+        let len = self.frames.len();
+        let mut f = self.frames[self.next % len].clone();
+        let lap = (self.next / len) as f64;
+        f.meta.time += lap * 10.0;
+        f.meta.index += (lap as u64) * 1000;
+        self.next += 1;
+        f
+    }
+}
+
+fn run(g: &mut FrameGenerator, feed: &mut Feed) {
+    g.push(&feed.next()).expect("push");
+    g.generate(0.5).expect("generate");
+}
+
+fn bench(c: &mut Criterion) {
+    let size = size();
+    let rendered = tests::render_scene("default", size, 60.0, 60..76);
+    let frames = framegen::decimate::decimate(&rendered, 2);
+    let ctx = GpuContext::new().expect("GPU");
+    let label = format!("{}x{}", size.width, size.height);
+    for gpu in [false, true] {
+        let backend = if gpu { "wgpu" } else { "cpu" };
+        let make = |method| {
+            let s = Settings {
+                cut_dynamic_fraction: 2.0,
+                ..Settings::for_method(method)
+            };
+            if gpu {
+                FrameGenerator::with_backend(s, Box::new(GpuBackend::profiled(ctx.clone())))
+            } else {
+                FrameGenerator::cpu(s)
+            }
+            .expect("generator")
+        };
+        let mut group = c.benchmark_group(format!("{backend}/{label}"));
+        group
+            .sample_size(10)
+            .warm_up_time(Duration::from_secs(1))
+            .measurement_time(Duration::from_secs(if gpu { 4 } else { 8 }));
+        let mut g = make(Method::Gffe);
+        let mut feed = Feed {
+            frames: frames.clone(),
+            next: 0,
+        };
+        for _ in 0..3 {
+            run(&mut g, &mut feed);
+        }
+        for pass in [
+            Pass::Upload,
+            Pass::History,
+            Pass::Background,
+            Pass::Motion,
+            Pass::Warp,
+            Pass::BgFill,
+            Pass::Holes,
+            Pass::Readback,
+        ] {
+            if !gpu && matches!(pass, Pass::Upload | Pass::Readback) {
+                continue;
+            }
+            group.bench_function(format!("gffe/{}", pass.name()), |b| {
+                b.iter_custom(|iters| {
+                    let mut total = Duration::ZERO;
+                    for _ in 0..iters {
+                        run(&mut g, &mut feed);
+                        total += g
+                            .timings()
+                            .iter()
+                            .filter(|t| t.pass == pass)
+                            .map(|t| t.time)
+                            .sum::<Duration>();
+                    }
+                    total
+                })
+            });
+        }
+        for method in Method::ALL {
+            let mut g = make(method);
+            group.bench_function(format!("{method}/total"), |b| {
+                b.iter(|| run(&mut g, &mut feed))
+            });
+        }
+        if gpu {
+            let bytes = size.pixels() * 28;
+            let src = ctx.storage("copy src", bytes);
+            let dst = ctx.storage("copy dst", bytes);
+            group.bench_function("copy", |b| {
+                b.iter(|| {
+                    let mut enc = ctx.device.create_command_encoder(&Default::default());
+                    enc.copy_buffer_to_buffer(&src, 0, &dst, 0, bytes);
+                    ctx.queue.submit([enc.finish()]);
+                    ctx.wait().expect("wait");
+                })
+            });
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
