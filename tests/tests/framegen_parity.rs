@@ -37,6 +37,15 @@ fn pos_close(a: [f32; 4], b: [f32; 4]) -> bool {
     a[3] == b[3] && (0..3).all(|i| close(a[i], b[i], 1e-4))
 }
 
+/// Every pixel's position relative to its camera (`P_0` of the history
+/// reference without a previous frame).
+fn unprojected(f: &Frame) -> Vec<[f32; 4]> {
+    let p = framegen::input::prepare(f);
+    let cam =
+        framegen::camera::PassCamera::new(&f.meta.camera, f.meta.size, f.meta.camera.pose.position);
+    framegen::gffe::history::track(&cam, &p.depth, &p.motion, None, 1, 0.5, 0.02).positions
+}
+
 /// History tracking and background collection: positions, track words and
 /// background texels after every frame.
 #[test]
@@ -107,19 +116,7 @@ fn splat_winners_are_exact() {
     let ctx = ctx();
     let fs = frames("default", 40, 1);
     let f = &fs[0];
-    let prepared = framegen::input::prepare(f);
-    let cam =
-        framegen::camera::PassCamera::new(&f.meta.camera, f.meta.size, f.meta.camera.pose.position);
-    let positions: Vec<[f32; 4]> = (0..prepared.depth.len())
-        .map(|i| {
-            let d = prepared.depth[i];
-            if d > 0.0 {
-                cam.unproject(framegen::camera::pixel_center(i, SIZE.width), d)
-            } else {
-                [0.0, 0.0, 0.0, -1.0]
-            }
-        })
-        .collect();
+    let positions = unprojected(f);
     // A target camera turned and moved a little; plus duplicated candidates
     // to force exact ties.
     let mut target_cam = f.meta.camera;
@@ -163,18 +160,7 @@ fn warp_projection_matches() {
         let fs = frames(scene, 30, 2);
         let f = &fs[1];
         let origin = f.meta.camera.pose.position;
-        let cam = framegen::camera::PassCamera::new(&f.meta.camera, f.meta.size, origin);
-        let prepared = framegen::input::prepare(f);
-        let next: Vec<[f32; 4]> = (0..prepared.depth.len())
-            .map(|i| {
-                let d = prepared.depth[i];
-                if d > 0.0 {
-                    cam.unproject(framegen::camera::pixel_center(i, SIZE.width), d)
-                } else {
-                    [0.0, 0.0, 0.0, -1.0]
-                }
-            })
-            .collect();
+        let next = unprojected(f);
         let target_pose =
             protocol::Pose::extrapolate(&fs[0].meta.camera.pose, &f.meta.camera.pose, 0.5);
         let mut tc = f.meta.camera;
