@@ -8,6 +8,8 @@
 //!   reports to the server.
 
 pub mod connect;
+pub mod demo;
+pub mod present;
 pub mod receiver;
 pub mod tls;
 

@@ -4,55 +4,146 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
+use client::present::{PresentConfig, run_headless};
 use client::{ConnectConfig, Pin};
+use framegen::Method;
+use protocol::FrameSize;
 use protocol::dump::{DumpWriter, Manifest};
 
 #[derive(Parser)]
 #[command(version, about = "Frame-generation streaming client")]
 struct Cli {
+    /// Without a subcommand: `run` with its defaults (the demo).
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
+}
+
+/// Options of `run`.
+#[derive(Args, Clone, Debug)]
+struct RunArgs {
+    /// Frame generation method: repeat, reproject or gffe.
+    #[arg(long, default_value = "gffe")]
+    method: Method,
+    /// Generated frames per rendered frame (display = (n+1) × render rate).
+    #[arg(short, long, default_value_t = 1)]
+    n: u32,
+    /// Rendered size (in-process server).
+    #[arg(long, default_value = "320x180", value_parser = parse_size)]
+    size: FrameSize,
+    /// Render rate (in-process server).
+    #[arg(long, default_value_t = 30.0)]
+    fps: f64,
+    /// Scene of the in-process server: builtin:NAME or a RON file.
+    #[arg(long, default_value = "builtin:default")]
+    scene: String,
+    /// Seconds to present.
+    #[arg(long, default_value_t = 5.0)]
+    seconds: f64,
+    /// Largest α extrapolated before the last frame is held.
+    #[arg(long, default_value_t = 3.0)]
+    max_alpha: f64,
+    /// Use a remote server instead of the in-process one (needs --pin and --token).
+    #[arg(long)]
+    server: Option<SocketAddr>,
+    /// SHA-256 fingerprint of the remote server's certificate.
+    #[arg(long)]
+    pin: Option<String>,
+    /// Access token of the remote server.
+    #[arg(long, env = "FRAMEGEN_TOKEN")]
+    token: Option<String>,
+    /// Where frames are generated: `wgpu`, `cpu` (the reference), or
+    /// `auto`: wgpu on a hardware adapter, the CPU reference when the only
+    /// adapter is a software rasteriser (lavapipe shares the CPU with the
+    /// in-process server's renderer, and the single-threaded reference is
+    /// faster there; see the README).
+    #[arg(long, default_value = "auto", value_parser = ["auto", "wgpu", "cpu"])]
+    backend: String,
+    /// Write every presented frame as a PNG into this directory.
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// Write the full report (every displayed frame) as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+impl Default for RunArgs {
+    fn default() -> Self {
+        /// `RunArgs` alone, to take its defaults from clap.
+        #[derive(Parser)]
+        struct Only {
+            #[command(flatten)]
+            args: RunArgs,
+        }
+        Only::parse_from(["client"]).args
+    }
+}
+
+fn parse_size(s: &str) -> Result<FrameSize, String> {
+    let (w, h) = s.split_once('x').ok_or("expected WIDTHxHEIGHT")?;
+    let w = w.parse().map_err(|e| format!("width: {e}"))?;
+    let h = h.parse().map_err(|e| format!("height: {e}"))?;
+    protocol::Limits::default()
+        .check_size(w, h)
+        .map_err(|e| e.to_string())?;
+    Ok(FrameSize::new(w, h))
 }
 
 #[derive(Subcommand)]
 enum Command {
+    /// Receive frames, generate the in-between ones and present them
+    /// (headless), then print the latency summary. Without --server it
+    /// starts an in-process server on loopback rendering the scene.
+    Run(RunArgs),
     /// Connect to a server and receive frames.
-    Connect {
-        /// Server address.
-        #[arg(default_value = "127.0.0.1:4433")]
-        addr: SocketAddr,
-        /// SHA-256 fingerprint of the server certificate (as `server serve`
-        /// prints it).
-        #[arg(long, conflicts_with_all = ["pin_file", "dangerous_accept_any_certificate"])]
-        pin: Option<String>,
-        /// The server certificate (DER) to pin.
-        #[arg(long)]
-        pin_file: Option<PathBuf>,
-        /// Trust any certificate. Anyone on the path can impersonate the
-        /// server: for debugging only.
-        #[arg(long)]
-        dangerous_accept_any_certificate: bool,
-        /// Access token.
-        #[arg(long, env = "FRAMEGEN_TOKEN")]
-        token: String,
-        /// Stop after this many frames.
-        #[arg(long)]
-        frames: Option<u64>,
-        /// Stop after this many seconds.
-        #[arg(long)]
-        seconds: Option<f64>,
-        /// Write the received frames as a dump.
-        #[arg(long)]
-        dump_to: Option<PathBuf>,
-    },
+    Connect(ConnectArgs),
+}
+
+/// Options of `connect`.
+#[derive(Args)]
+struct ConnectArgs {
+    /// Server address.
+    #[arg(default_value = "127.0.0.1:4433")]
+    addr: SocketAddr,
+    /// SHA-256 fingerprint of the server certificate (as `server serve`
+    /// prints it).
+    #[arg(long, conflicts_with_all = ["pin_file", "dangerous_accept_any_certificate"])]
+    pin: Option<String>,
+    /// The server certificate (DER) to pin.
+    #[arg(long)]
+    pin_file: Option<PathBuf>,
+    /// Trust any certificate. Anyone on the path can impersonate the
+    /// server: for debugging only.
+    #[arg(long)]
+    dangerous_accept_any_certificate: bool,
+    /// Access token.
+    #[arg(long, env = "FRAMEGEN_TOKEN")]
+    token: String,
+    /// Stop after this many frames.
+    #[arg(long)]
+    frames: Option<u64>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    seconds: Option<f64>,
+    /// Write the received frames as a dump.
+    #[arg(long)]
+    dump_to: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .init();
-    let Command::Connect {
+    match Cli::parse().command {
+        None => run(RunArgs::default()),
+        Some(Command::Run(args)) => run(args),
+        Some(Command::Connect(args)) => connect(args),
+    }
+}
+
+/// `client connect`: receive frames, optionally into a dump.
+fn connect(args: ConnectArgs) -> anyhow::Result<()> {
+    let ConnectArgs {
         addr,
         pin,
         pin_file,
@@ -61,7 +152,7 @@ fn main() -> anyhow::Result<()> {
         frames,
         seconds,
         dump_to,
-    } = Cli::parse().command;
+    } = args;
     let pin = match (pin, pin_file, dangerous_accept_any_certificate) {
         (Some(hex), _, _) => Pin::Sha256(hex),
         (None, Some(file), _) => Pin::CertFile(file),
@@ -136,6 +227,92 @@ fn main() -> anyhow::Result<()> {
             println!("wrote {} frames to {}", m.frame_count, dump_to.unwrap_or_default().display());
         }
         session.close().await;
+        anyhow::Ok(())
+    })
+}
+
+/// `client run`: the demo loop.
+fn run(args: RunArgs) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    runtime.block_on(async move {
+        let local = match args.server {
+            Some(_) => None,
+            None => {
+                println!(
+                    "starting an in-process server: {} at {}x{}, {} fps",
+                    args.scene, args.size.width, args.size.height, args.fps
+                );
+                Some(client::demo::start_local(&args.scene, args.size, args.fps)?)
+            }
+        };
+        let mut session = match (&local, args.server) {
+            (Some(l), _) => l.connect().await?,
+            (None, Some(addr)) => {
+                let (Some(pin), Some(token)) = (args.pin.clone(), args.token.clone()) else {
+                    anyhow::bail!("--server needs --pin FINGERPRINT and --token TOKEN");
+                };
+                client::connect(ConnectConfig::new(addr, Pin::Sha256(pin), token)).await?
+            }
+            (None, None) => unreachable!("a local server exists without --server"),
+        };
+        let gpu = match args.backend.as_str() {
+            "cpu" => None,
+            wanted => match client::demo::gpu() {
+                Ok(g) if wanted == "wgpu" || g.adapter_info.device_type != wgpu::DeviceType::Cpu => {
+                    Some(g)
+                }
+                Ok(g) => {
+                    println!(
+                        "the only adapter is a software rasteriser ({}): generating on the CPU reference (--backend wgpu to force it)",
+                        g.adapter_info.name
+                    );
+                    None
+                }
+                Err(e) if wanted == "wgpu" => return Err(e),
+                Err(e) => {
+                    println!("no GPU for frame generation ({e}); generating on the CPU reference");
+                    None
+                }
+            },
+        };
+        println!(
+            "no window presenter yet: presenting headless for {} s ({} -> {} fps, method {})",
+            args.seconds,
+            session.welcome.fps,
+            session.welcome.fps * f64::from(args.n + 1),
+            args.method
+        );
+        let config = PresentConfig {
+            method: args.method,
+            n: args.n,
+            duration: Duration::from_secs_f64(args.seconds.max(0.0)),
+            max_alpha: args.max_alpha,
+            png_dir: args.png.clone(),
+            cpu: gpu.is_none(),
+        };
+        let report = run_headless(&mut session, &config, gpu).await?;
+        session.close().await;
+        if let Some(l) = local {
+            l.server.shutdown().await;
+        }
+        println!(
+            "method {} on {}: received {} frames, {} vsyncs missed; generation ms p50 {:.2} p99 {:.2}; ingest ms p50 {:.2} p99 {:.2}",
+            report.method,
+            report.backend,
+            report.received,
+            report.missed_vsyncs,
+            report.generation_ms.p50,
+            report.generation_ms.p99,
+            report.ingest_ms.p50,
+            report.ingest_ms.p99,
+        );
+        print!("{}", report.summary.to_text());
+        if let Some(path) = &args.json {
+            std::fs::write(path, serde_json::to_vec_pretty(&report)?)?;
+            println!("wrote {}", path.display());
+        }
         anyhow::Ok(())
     })
 }

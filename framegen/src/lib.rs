@@ -8,6 +8,7 @@
 //!   and a plain CPU reference of the same computation.
 //! * [`display`] and [`metrics`] are what every method is measured by.
 
+pub mod accounting;
 pub mod camera;
 pub mod cpu;
 pub mod decimate;
@@ -18,6 +19,7 @@ pub mod input;
 pub mod levels;
 pub mod metrics;
 pub mod output;
+pub mod schedule;
 pub mod settings;
 pub mod splat;
 

@@ -1,0 +1,94 @@
+//! The one-command demo (the README's main job): an in-process server on
+//! loopback renders a built-in scene live, the client connects over real
+//! QUIC + TLS (pinning the server's fresh self-signed certificate),
+//! generates frames and presents them.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use protocol::Codec;
+use protocol::FrameSize;
+use protocol::wire::{StreamBuffer, WindowMode};
+use server::render::WindowSettings;
+use server::serve::Server;
+use server::session::Policy;
+use server::source::{Feed, Source, SourceSpec};
+use server::tls::Identity;
+
+use crate::{ConnectConfig, Pin, Session};
+
+/// A running in-process server and its source.
+pub struct LocalServer {
+    /// The QUIC endpoint.
+    pub server: Server,
+    /// Where it listens.
+    pub addr: SocketAddr,
+    /// The certificate fingerprint to pin.
+    pub fingerprint: String,
+    /// The access token.
+    pub token: String,
+    _source: Source,
+    _identity_dir: tempfile::TempDir,
+}
+
+/// Starts a server on 127.0.0.1 (a free port) rendering `scene` live at
+/// `size` and `fps`.
+pub fn start_local(scene: &str, size: FrameSize, fps: f64) -> anyhow::Result<LocalServer> {
+    let identity_dir = tempfile::tempdir()?;
+    let identity = Identity::load_or_create(identity_dir.path())?;
+    let token = format!("demo-{}", std::process::id());
+    let buffers = StreamBuffer::default_set(Codec::Zstd).to_vec();
+    let policy = Policy {
+        token: token.clone(),
+        server_name: "in-process demo server".into(),
+        size,
+        max_frame: size,
+        fps,
+        buffers: buffers.clone(),
+        window_mode: WindowMode::Off,
+    };
+    let frames = Source::channel();
+    let source = Source::start(
+        SourceSpec::Scene {
+            spec: scene.into(),
+            size,
+            fps,
+            window: WindowSettings::default(),
+            base: std::path::PathBuf::from("."),
+        },
+        buffers,
+        frames.clone(),
+    )?;
+    let server = Server::start(
+        "127.0.0.1:0".parse()?,
+        identity.quic_server_config()?,
+        policy,
+        Feed::Live(frames),
+    )?;
+    let addr = server.local_addr()?;
+    Ok(LocalServer {
+        server,
+        addr,
+        fingerprint: identity.fingerprint(),
+        token,
+        _source: source,
+        _identity_dir: identity_dir,
+    })
+}
+
+impl LocalServer {
+    /// Connects a client session to it.
+    pub async fn connect(&self) -> anyhow::Result<Session> {
+        Ok(crate::connect(ConnectConfig::new(
+            self.addr,
+            Pin::Sha256(self.fingerprint.clone()),
+            self.token.clone(),
+        ))
+        .await?)
+    }
+}
+
+/// Opens the GPU for frame generation, or says why not.
+pub fn gpu() -> anyhow::Result<Arc<framegen::GpuContext>> {
+    Ok(framegen::GpuContext::new()?)
+}

@@ -1,0 +1,254 @@
+//! The presentation loop (DESIGN §8): frames from a [`Session`] go into a
+//! [`FrameGenerator`], the sans-IO [`Scheduler`] decides every vsync what
+//! the display shows, and [`Accounting`] records every displayed frame.
+//!
+//! This is the headless presenter: a virtual vsync clock on the wall clock
+//! at the display rate. "Present" is the first vsync at or after the slot's
+//! image was finished (submitted); each slot is decided at its vsync and
+//! shown at the next one, as a swap chain with one frame of queue would.
+//! Presented frames can be written as display-encoded PNGs.
+//!
+//! Times are from the moment the first frame was pushed (kernels compiled,
+//! stream running). A frame's receive time is when the loop took it from
+//! the session's queue (at most one vsync after its last byte arrived); its
+//! ready time is after it was pushed into the generator (upload, history
+//! tracking, background collection). When several frames arrived within one
+//! vsync only the newest is pushed; the others are superseded.
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use framegen::accounting::{Accounting, Percentiles, Record, Summary};
+use framegen::schedule::{FrameReady, Policy, ScheduleConfig, Scheduler, Slot, SlotKind};
+use framegen::{FrameGenerator, GpuContext, Method, Settings};
+use protocol::Frame;
+use serde::Serialize;
+
+use crate::Session;
+
+/// What the presenter does.
+#[derive(Clone, Debug)]
+pub struct PresentConfig {
+    /// Frame generation method.
+    pub method: Method,
+    /// Generated frames per rendered frame (display = (n+1) × render rate).
+    pub n: u32,
+    /// How long to present.
+    pub duration: Duration,
+    /// Largest α extrapolated before holding the last frame.
+    pub max_alpha: f64,
+    /// Write every presented frame as a PNG here.
+    pub png_dir: Option<PathBuf>,
+    /// Run the passes on the CPU reference instead of wgpu.
+    pub cpu: bool,
+}
+
+impl Default for PresentConfig {
+    fn default() -> Self {
+        Self {
+            method: Method::Gffe,
+            n: 1,
+            duration: Duration::from_secs(5),
+            max_alpha: 3.0,
+            png_dir: None,
+            cpu: false,
+        }
+    }
+}
+
+/// The scheduling policy a method needs.
+pub fn policy_of(method: Method) -> Policy {
+    match method {
+        Method::Repeat => Policy::Repeat,
+        Method::Reproject | Method::Gffe => Policy::Extrapolate,
+    }
+}
+
+/// How long to wait for a session's first frame.
+pub const FIRST_FRAME_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// The result of a presentation run.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// Method name.
+    pub method: String,
+    /// Backend that generated frames.
+    pub backend: String,
+    /// Render and display rates.
+    pub render_fps: f64,
+    /// Display rate.
+    pub display_fps: f64,
+    /// Seconds presented.
+    pub seconds: f64,
+    /// Frames received from the session.
+    pub received: u64,
+    /// Vsyncs whose slot could not be prepared in time (the loop was
+    /// behind), skipped.
+    pub missed_vsyncs: u64,
+    /// Generation time per generated frame, ms.
+    pub generation_ms: Percentiles,
+    /// Push (upload + history + background) time per rendered frame, ms.
+    pub ingest_ms: Percentiles,
+    /// Latency summary.
+    pub summary: Summary,
+    /// Every displayed frame.
+    pub records: Vec<Record>,
+}
+
+/// Presents `session` headless for `config.duration`.
+pub async fn run_headless(
+    session: &mut Session,
+    config: &PresentConfig,
+    gpu: Option<Arc<GpuContext>>,
+) -> anyhow::Result<Report> {
+    let fps = session.welcome.fps;
+    let policy = policy_of(config.method);
+    let schedule = ScheduleConfig {
+        max_alpha: config.max_alpha,
+        ..ScheduleConfig::multiple(policy, fps, config.n)
+    };
+    let settings = Settings {
+        n: config.n,
+        max_alpha: config.max_alpha.max(1.0),
+        ..Settings::for_method(config.method)
+    };
+    let mut generator = match (&gpu, config.cpu) {
+        (Some(ctx), false) => FrameGenerator::gpu(settings, ctx.clone())?,
+        _ => FrameGenerator::cpu(settings)?,
+    };
+    if let Some(dir) = &config.png_dir {
+        std::fs::create_dir_all(dir)?;
+    }
+    let mut scheduler = Scheduler::new(schedule);
+    let mut accounting = Accounting::new(schedule, Duration::ZERO);
+    let di = schedule.display_interval;
+    // The clock starts when the first frame is in: waiting for the stream to
+    // begin and compiling the GPU kernels (first push and generation) are
+    // not presentation.
+    let first = tokio::time::timeout(FIRST_FRAME_TIMEOUT, session.frames.recv())
+        .await
+        .map_err(|_| anyhow::anyhow!("no frame within {FIRST_FRAME_TIMEOUT:?}"))?
+        .ok_or_else(|| anyhow::anyhow!("the session ended before its first frame"))?;
+    tokio::task::block_in_place(|| -> anyhow::Result<()> {
+        generator.push(&first)?;
+        generator.generate(0.5)?;
+        Ok(())
+    })?;
+    let start = Instant::now();
+    let clock = || start.elapsed();
+    scheduler.frame_ready(FrameReady {
+        id: first.meta.index,
+        sim_time: first.meta.time,
+        host_processing: first.meta.host_processing,
+        received_at: Duration::ZERO,
+        ready_at: Duration::ZERO,
+    });
+    // Rendered frames that may still be shown (the newest few).
+    let mut kept: VecDeque<Frame> = VecDeque::from([first]);
+    let (mut generation, mut ingest) = (Vec::new(), Vec::new());
+    let (mut received, mut missed) = (1u64, 0u64);
+    let mut k: u64 = 0;
+    let last = (config.duration.as_secs_f64() / di.as_secs_f64()).floor() as u64;
+    loop {
+        if k > last {
+            break;
+        }
+        let vsync = di * k as u32;
+        tokio::time::sleep_until((start + vsync).into()).await;
+        // Everything that arrived since the last vsync; only the newest is
+        // generated from (the scheduler counts the others as superseded).
+        let mut arrived = Vec::new();
+        while let Ok(frame) = session.frames.try_recv() {
+            arrived.push((frame, clock()));
+        }
+        received += arrived.len() as u64;
+        if let Some((newest, _)) = arrived.last() {
+            let t = Instant::now();
+            tokio::task::block_in_place(|| generator.push(newest))?;
+            ingest.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let ready_at = clock();
+        for (frame, received_at) in arrived {
+            scheduler.frame_ready(FrameReady {
+                id: frame.meta.index,
+                sim_time: frame.meta.time,
+                host_processing: frame.meta.host_processing,
+                received_at,
+                ready_at,
+            });
+            kept.push_back(frame);
+            if kept.len() > 4 {
+                kept.pop_front();
+            }
+        }
+        if let Some(slot) = scheduler.vsync(vsync) {
+            let (image, ready_at) = produce(&slot, &mut generator, &kept, &mut generation, start)?;
+            if let (Some(dir), Some(image)) = (&config.png_dir, image) {
+                write_png(dir, slot.display_id, &image)?;
+            }
+            let done = clock();
+            let present_at = accounting.first_vsync_after(done.max(vsync + di));
+            accounting.record(&slot, ready_at.unwrap_or(done), present_at);
+        }
+        // Skip vsyncs that passed while this slot was prepared.
+        let next = ((clock().as_secs_f64() / di.as_secs_f64()).floor() as u64).max(k + 1);
+        missed += next.min(last + 1) - k - 1;
+        k = next;
+    }
+    let summary = accounting.summary(scheduler.drops());
+    Ok(Report {
+        method: config.method.name().into(),
+        backend: generator.backend_name(),
+        render_fps: fps,
+        display_fps: 1.0 / di.as_secs_f64(),
+        seconds: config.duration.as_secs_f64(),
+        received,
+        missed_vsyncs: missed,
+        generation_ms: Percentiles::of(generation),
+        ingest_ms: Percentiles::of(ingest),
+        summary,
+        records: accounting.records().to_vec(),
+    })
+}
+
+/// The image of a slot and when it was ready (the source frame's ready
+/// time, or the end of generation).
+fn produce(
+    slot: &Slot,
+    generator: &mut FrameGenerator,
+    kept: &VecDeque<Frame>,
+    generation: &mut Vec<f64>,
+    start: Instant,
+) -> anyhow::Result<(Option<Frame>, Option<Duration>)> {
+    match slot.kind {
+        SlotKind::Rendered | SlotKind::Repeated => {
+            let frame = kept
+                .iter()
+                .find(|f| f.meta.index == slot.source.id)
+                .cloned();
+            Ok((frame, Some(slot.source.ready_at)))
+        }
+        SlotKind::Extrapolated | SlotKind::Interpolated => {
+            let t = Instant::now();
+            let g = tokio::task::block_in_place(|| generator.generate(slot.alpha))?;
+            generation.push(t.elapsed().as_secs_f64() * 1e3);
+            Ok((Some(g.frame), Some(start.elapsed())))
+        }
+    }
+}
+
+fn write_png(dir: &std::path::Path, id: u64, frame: &Frame) -> anyhow::Result<()> {
+    let size = frame.meta.size;
+    let image = framegen::display_encode(size.width, size.height, &frame.color)
+        .ok_or_else(|| anyhow::anyhow!("frame buffers do not match its size"))?;
+    image::save_buffer(
+        dir.join(format!("{id:06}.png")),
+        &image.to_rgb8(),
+        size.width,
+        size.height,
+        image::ExtendedColorType::Rgb8,
+    )?;
+    Ok(())
+}

@@ -1,0 +1,290 @@
+//! Per-displayed-frame accounting (DESIGN §8) on the latency model of
+//! ExtraNet §3.1: latency runs from the moment a frame is *ready* (a
+//! rendered frame decoded, a generated frame finished) to the moment it is
+//! *presented*. Field names follow PresentMon where one fits
+//! (`ms_between_presents`, `ms_animation_error`).
+//!
+//! "Present" is what the presenter reports: wgpu has no presentation-timing
+//! API, so the presenters here report the vsync the frame was submitted for
+//! (the slot's vsync when the submission finished before it, otherwise the
+//! next vsync after the submission). The JSON report says so.
+
+use std::time::Duration;
+
+use serde::Serialize;
+
+use crate::schedule::{Drops, ScheduleConfig, Slot, SlotKind};
+
+/// One displayed frame.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Record {
+    /// Consecutive display id.
+    pub display_id: u64,
+    /// What was shown.
+    pub kind: SlotKind,
+    /// Source rendered frame (the older one for interpolation).
+    pub source: u64,
+    /// Newer rendered frame of an interpolation.
+    pub next: Option<u64>,
+    /// α of a generated frame.
+    pub alpha: f64,
+    /// The source's host processing time (from its header), ms.
+    pub host_processing_ms: f64,
+    /// When the source's last byte arrived, ms since the session start.
+    pub received_ms: f64,
+    /// When what was shown was ready, ms.
+    pub ready_ms: f64,
+    /// When it was presented, ms.
+    pub present_ms: f64,
+    /// ExtraNet latency: present − ready, ms.
+    pub latency_ms: f64,
+    /// For rendered frames: how much later it was shown than a display
+    /// showing rendered frames directly would (the first vsync after it was
+    /// ready), ms. What frame generation adds.
+    pub added_latency_ms: Option<f64>,
+    /// Time between this present and the previous one, ms.
+    pub ms_between_presents: Option<f64>,
+    /// |Δ present time − Δ simulation time shown|, ms: judder.
+    pub ms_animation_error: Option<f64>,
+}
+
+/// Percentiles of one quantity.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Percentiles {
+    /// Samples.
+    pub count: usize,
+    /// Median.
+    pub p50: f64,
+    /// 95th percentile.
+    pub p95: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+impl Percentiles {
+    /// Nearest-rank percentiles of `values` (NaN-free).
+    pub fn of(mut values: Vec<f64>) -> Self {
+        if values.is_empty() {
+            return Self::default();
+        }
+        values.sort_by(f64::total_cmp);
+        let at =
+            |p: f64| values[((p * values.len() as f64).ceil() as usize).clamp(1, values.len()) - 1];
+        Self {
+            count: values.len(),
+            p50: at(0.50),
+            p95: at(0.95),
+            p99: at(0.99),
+            max: values[values.len() - 1],
+        }
+    }
+}
+
+/// A session's summary.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Summary {
+    /// What "present" means here.
+    pub present_means: &'static str,
+    /// Displayed frames by kind.
+    pub rendered: usize,
+    /// Extrapolated slots.
+    pub extrapolated: usize,
+    /// Interpolated slots.
+    pub interpolated: usize,
+    /// Repeated (held) slots.
+    pub repeated: usize,
+    /// ExtraNet latency of every displayed frame.
+    pub latency_ms: Percentiles,
+    /// Latency frame generation adds to rendered frames.
+    pub added_latency_ms: Percentiles,
+    /// PresentMon MsBetweenPresents.
+    pub ms_between_presents: Percentiles,
+    /// PresentMon MsAnimationError.
+    pub ms_animation_error: Percentiles,
+    /// Frames never shown, by cause.
+    pub drops: Drops,
+}
+
+/// What "present" means in every report.
+pub const PRESENT_MEANS: &str = "the vsync a frame was submitted for: its slot's vsync if the submission finished before it, else the next vsync (wgpu has no presentation timing)";
+
+/// Collects [`Record`]s.
+#[derive(Clone, Debug)]
+pub struct Accounting {
+    config: ScheduleConfig,
+    /// Time of vsync 0 (the vsync grid is `origin + k · display_interval`).
+    origin: Duration,
+    records: Vec<Record>,
+    last: Option<(f64, f64)>,
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+impl Accounting {
+    /// Accounting for a display whose vsyncs are `origin + k·interval`.
+    pub fn new(config: ScheduleConfig, origin: Duration) -> Self {
+        Self {
+            config,
+            origin,
+            records: Vec::new(),
+            last: None,
+        }
+    }
+
+    /// The first vsync at or after `t`.
+    pub fn first_vsync_after(&self, t: Duration) -> Duration {
+        let di = self.config.display_interval.as_secs_f64();
+        let k = ((t.saturating_sub(self.origin)).as_secs_f64() / di - 1e-9)
+            .ceil()
+            .max(0.0);
+        self.origin + Duration::from_secs_f64(k * di)
+    }
+
+    /// Records a presented slot: `ready_at` is when its image was ready
+    /// (the source's ready time for rendered and repeated slots, the end of
+    /// generation for generated ones), `present_at` when it was presented.
+    pub fn record(&mut self, slot: &Slot, ready_at: Duration, present_at: Duration) {
+        let sim = slot.sim_time(self.config.render_interval) * 1e3;
+        let present = ms(present_at);
+        let (between, animation) = match self.last {
+            Some((p, s)) => (Some(present - p), Some(((present - p) - (sim - s)).abs())),
+            None => (None, None),
+        };
+        self.last = Some((present, sim));
+        let added = (slot.kind == SlotKind::Rendered)
+            .then(|| present - ms(self.first_vsync_after(slot.source.ready_at)));
+        self.records.push(Record {
+            display_id: slot.display_id,
+            kind: slot.kind,
+            source: slot.source.id,
+            next: slot.next.map(|n| n.id),
+            alpha: slot.alpha,
+            host_processing_ms: ms(slot.source.host_processing),
+            received_ms: ms(slot.source.received_at),
+            ready_ms: ms(ready_at),
+            present_ms: present,
+            latency_ms: present - ms(ready_at),
+            added_latency_ms: added,
+            ms_between_presents: between,
+            ms_animation_error: animation,
+        });
+    }
+
+    /// Every record so far.
+    pub fn records(&self) -> &[Record] {
+        &self.records
+    }
+
+    /// The summary, with the scheduler's drop counts.
+    pub fn summary(&self, drops: Drops) -> Summary {
+        let count = |k: SlotKind| self.records.iter().filter(|r| r.kind == k).count();
+        let collect = |f: &dyn Fn(&Record) -> Option<f64>| {
+            Percentiles::of(self.records.iter().filter_map(f).collect())
+        };
+        Summary {
+            present_means: PRESENT_MEANS,
+            rendered: count(SlotKind::Rendered),
+            extrapolated: count(SlotKind::Extrapolated),
+            interpolated: count(SlotKind::Interpolated),
+            repeated: count(SlotKind::Repeated),
+            latency_ms: collect(&|r| Some(r.latency_ms)),
+            added_latency_ms: collect(&|r| r.added_latency_ms),
+            ms_between_presents: collect(&|r| r.ms_between_presents),
+            ms_animation_error: collect(&|r| r.ms_animation_error),
+            drops,
+        }
+    }
+}
+
+impl Summary {
+    /// A one-screen text summary.
+    pub fn to_text(&self) -> String {
+        let p = |name: &str, q: &Percentiles| {
+            format!(
+                "  {name:<22} p50 {:7.2}  p95 {:7.2}  p99 {:7.2}  max {:7.2}  (n={})\n",
+                q.p50, q.p95, q.p99, q.max, q.count
+            )
+        };
+        let mut s = format!(
+            "displayed: {} rendered, {} extrapolated, {} interpolated, {} repeated\n",
+            self.rendered, self.extrapolated, self.interpolated, self.repeated
+        );
+        s += &p("latency ms", &self.latency_ms);
+        s += &p("added latency ms", &self.added_latency_ms);
+        s += &p("MsBetweenPresents", &self.ms_between_presents);
+        s += &p("MsAnimationError", &self.ms_animation_error);
+        s += &format!(
+            "  drops: network {}, late {}, scheduler {}\n  present = {}\n",
+            self.drops.network, self.drops.late, self.drops.scheduler, self.present_means
+        );
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::schedule::{FrameReady, Policy, Scheduler};
+
+    #[test]
+    fn percentiles_use_nearest_rank() {
+        let p = Percentiles::of((1..=100).map(f64::from).collect());
+        assert_eq!((p.p50, p.p95, p.p99, p.max), (50.0, 95.0, 99.0, 100.0));
+        assert_eq!(Percentiles::of(vec![]).count, 0);
+    }
+
+    /// A steady 30 fps stream at 60 Hz: extrapolation adds nothing and
+    /// generated frames wait only for their vsync; interpolation adds one
+    /// render interval to every rendered frame.
+    #[test]
+    fn extrapolation_adds_nothing_interpolation_adds_an_interval() {
+        for (policy, lo, hi) in [
+            (Policy::Extrapolate, 0.0, 0.01),
+            (Policy::Interpolate, 33.3, 50.1),
+        ] {
+            let config = ScheduleConfig::multiple(policy, 30.0, 1);
+            let di = config.display_interval;
+            let mut s = Scheduler::new(config);
+            let mut acc = Accounting::new(config, Duration::ZERO);
+            for v in 0..120u32 {
+                let now = di * v;
+                if v % 2 == 1 {
+                    let id = u64::from(v / 2);
+                    s.frame_ready(FrameReady {
+                        id,
+                        sim_time: id as f64 / 30.0,
+                        host_processing: Duration::from_millis(4),
+                        received_at: now - Duration::from_millis(3),
+                        ready_at: now - Duration::from_millis(2),
+                    });
+                }
+                if let Some(slot) = s.vsync(now) {
+                    // Generation takes 3 ms and finishes before the vsync.
+                    let ready =
+                        if slot.kind == SlotKind::Rendered || slot.kind == SlotKind::Repeated {
+                            slot.source.ready_at
+                        } else {
+                            now
+                        };
+                    acc.record(&slot, ready, now);
+                }
+            }
+            let sum = acc.summary(s.drops());
+            assert!(
+                sum.added_latency_ms.p50 >= lo && sum.added_latency_ms.max <= hi,
+                "{policy:?}: {sum:?}"
+            );
+            assert!((sum.ms_between_presents.p99 - 1000.0 / 60.0).abs() < 0.01);
+            assert!(
+                sum.ms_animation_error.p99 < 0.01,
+                "{policy:?}: {:?}",
+                sum.ms_animation_error
+            );
+            assert!(sum.to_text().contains("MsBetweenPresents"));
+        }
+    }
+}

@@ -1,0 +1,412 @@
+//! The presentation scheduler (DESIGN §8, ExtraNet §3.1 and Fig. 2): a
+//! sans-IO state machine that decides, at every vsync, what the display
+//! shows. It is fed events with `now` and does no IO, so every policy is
+//! tested with a fake clock.
+//!
+//! * [`Scheduler::frame_ready`]: a rendered frame is decoded and can be
+//!   shown or generated from ("ready", ExtraNet's start of latency).
+//! * [`Scheduler::vsync`]: a display slot begins; the answer is a [`Slot`]
+//!   saying what to show (or `None` before the first frame).
+//!
+//! Policies:
+//! * **Extrapolate** (GFFE, no added latency): a rendered frame is shown at
+//!   the first vsync after it is ready. Until the next one is ready, the
+//!   slots show frames extrapolated from it at
+//!   `α = (vsync − its present time) / render interval` (α = j/(n+1) when
+//!   the display runs at (n+1)× the render rate). A late frame is covered
+//!   by extrapolating beyond α = 1 up to `max_alpha`, then the last frame
+//!   is held.
+//! * **Interpolate** (GeoMotionGen, adds latency): rendered frame t+1 is
+//!   held back until the frames between t and t+1 have been shown; a slot
+//!   never waits on the network (a missing t+1 holds t).
+//! * **Repeat**: the newest ready frame, again and again (the baseline).
+//!
+//! Frames that become ready but are never shown are counted as drops by
+//! cause: `network` (ids that never arrived), `late` (ready after a newer
+//! frame was already shown) and `scheduler` (superseded by a newer ready
+//! frame before any vsync showed them).
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use serde::Serialize;
+
+/// How slots are filled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Policy {
+    /// Show the newest rendered frame again.
+    Repeat,
+    /// Extrapolate from the newest rendered frame (no added latency).
+    Extrapolate,
+    /// Interpolate between the last two rendered frames (adds latency).
+    Interpolate,
+}
+
+/// What a slot shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SlotKind {
+    /// A rendered frame.
+    Rendered,
+    /// Extrapolated from `source` at `alpha`.
+    Extrapolated,
+    /// Interpolated between `source` and `next` at `alpha`.
+    Interpolated,
+    /// `source` shown again (no generation, or beyond the α limit).
+    Repeated,
+}
+
+/// Scheduler settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScheduleConfig {
+    /// The policy.
+    pub policy: Policy,
+    /// Time between rendered frames (1 / render rate).
+    pub render_interval: Duration,
+    /// Time between vsyncs (1 / display rate).
+    pub display_interval: Duration,
+    /// Largest α extrapolated before the last frame is held.
+    pub max_alpha: f64,
+}
+
+impl ScheduleConfig {
+    /// A display at (n + 1)× `render_fps`.
+    pub fn multiple(policy: Policy, render_fps: f64, n: u32) -> Self {
+        let render = Duration::from_secs_f64(1.0 / render_fps);
+        Self {
+            policy,
+            render_interval: render,
+            display_interval: render / (n + 1),
+            max_alpha: 3.0,
+        }
+    }
+}
+
+/// A rendered frame that has become ready.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct FrameReady {
+    /// Frame index (consecutive at the source).
+    pub id: u64,
+    /// Simulation time it shows, seconds.
+    pub sim_time: f64,
+    /// Host processing duration from its header.
+    pub host_processing: Duration,
+    /// When its last byte arrived.
+    pub received_at: Duration,
+    /// When it was decoded and uploaded (ExtraNet's "generated").
+    pub ready_at: Duration,
+}
+
+/// One display slot's decision.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Slot {
+    /// Consecutive display id.
+    pub display_id: u64,
+    /// The vsync this slot is shown at.
+    pub vsync: Duration,
+    /// What it shows.
+    pub kind: SlotKind,
+    /// The rendered frame it comes from (the older one for interpolation).
+    pub source: FrameReady,
+    /// The newer frame of an interpolation.
+    pub next: Option<FrameReady>,
+    /// α (0 for rendered and repeated slots).
+    pub alpha: f64,
+}
+
+impl Slot {
+    /// Simulation time of what the slot shows: `t + α·Δ`.
+    pub fn sim_time(&self, render_interval: Duration) -> f64 {
+        match self.next {
+            Some(next) => {
+                self.source.sim_time + self.alpha * (next.sim_time - self.source.sim_time)
+            }
+            None => self.source.sim_time + self.alpha * render_interval.as_secs_f64(),
+        }
+    }
+}
+
+/// Frames that were never shown, by cause.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Drops {
+    /// Ids the source sent that never became ready.
+    pub network: u64,
+    /// Ready only after a newer frame was shown.
+    pub late: u64,
+    /// Superseded by a newer ready frame before a vsync showed them.
+    pub scheduler: u64,
+}
+
+/// The scheduler.
+#[derive(Clone, Debug)]
+pub struct Scheduler {
+    config: ScheduleConfig,
+    /// Ready frames not shown yet, oldest first.
+    pending: VecDeque<FrameReady>,
+    /// The frame shown last as `Rendered`, and when.
+    shown: Option<(FrameReady, Duration)>,
+    highest_ready: Option<u64>,
+    next_display: u64,
+    drops: Drops,
+}
+
+impl Scheduler {
+    /// A scheduler with `config`.
+    pub fn new(config: ScheduleConfig) -> Self {
+        Self {
+            config,
+            pending: VecDeque::new(),
+            shown: None,
+            highest_ready: None,
+            next_display: 0,
+            drops: Drops::default(),
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &ScheduleConfig {
+        &self.config
+    }
+
+    /// Drops so far.
+    pub fn drops(&self) -> Drops {
+        self.drops
+    }
+
+    /// A rendered frame is ready.
+    pub fn frame_ready(&mut self, frame: FrameReady) {
+        if let Some(h) = self.highest_ready {
+            if frame.id <= h {
+                // Out of order: a newer frame is already ready or shown.
+                self.drops.late += 1;
+                return;
+            }
+            self.drops.network += frame.id - h - 1;
+        }
+        self.highest_ready = Some(frame.id);
+        self.pending.push_back(frame);
+    }
+
+    /// A vsync at `now`: what to show in this slot.
+    pub fn vsync(&mut self, now: Duration) -> Option<Slot> {
+        let (kind, source, next, alpha) = match self.config.policy {
+            Policy::Repeat | Policy::Extrapolate => self.extrapolate(now)?,
+            Policy::Interpolate => self.interpolate(now)?,
+        };
+        let slot = Slot {
+            display_id: self.next_display,
+            vsync: now,
+            kind,
+            source,
+            next,
+            alpha,
+        };
+        self.next_display += 1;
+        Some(slot)
+    }
+
+    fn take_newest_pending(&mut self, now: Duration) -> Option<FrameReady> {
+        let newest = self.pending.pop_back()?;
+        self.drops.scheduler += self.pending.len() as u64;
+        self.pending.clear();
+        self.shown = Some((newest, now));
+        Some(newest)
+    }
+
+    fn extrapolate(
+        &mut self,
+        now: Duration,
+    ) -> Option<(SlotKind, FrameReady, Option<FrameReady>, f64)> {
+        if let Some(f) = self.take_newest_pending(now) {
+            return Some((SlotKind::Rendered, f, None, 0.0));
+        }
+        let (source, at) = self.shown?;
+        let alpha =
+            (now.saturating_sub(at)).as_secs_f64() / self.config.render_interval.as_secs_f64();
+        if self.config.policy == Policy::Repeat || alpha > self.config.max_alpha {
+            return Some((SlotKind::Repeated, source, None, 0.0));
+        }
+        Some((SlotKind::Extrapolated, source, None, alpha))
+    }
+
+    fn interpolate(
+        &mut self,
+        now: Duration,
+    ) -> Option<(SlotKind, FrameReady, Option<FrameReady>, f64)> {
+        let ri = self.config.render_interval.as_secs_f64();
+        let Some((current, at)) = self.shown else {
+            // Start once two frames are ready: show the older, keep the newer.
+            if self.pending.len() < 2 {
+                return None;
+            }
+            let first = self.pending.pop_front()?;
+            self.drops.scheduler += self.pending.len().saturating_sub(1) as u64;
+            while self.pending.len() > 1 {
+                self.pending.pop_front();
+            }
+            self.shown = Some((first, now));
+            return Some((SlotKind::Rendered, first, None, 0.0));
+        };
+        let alpha = now.saturating_sub(at).as_secs_f64() / ri;
+        // Half a vsync of slack so rounding never skips a rendered frame.
+        let due = alpha + 0.5 * self.config.display_interval.as_secs_f64() / ri >= 1.0;
+        match self.pending.front().copied() {
+            Some(next) if due => {
+                self.pending.pop_front();
+                self.shown = Some((next, now));
+                Some((SlotKind::Rendered, next, None, 0.0))
+            }
+            Some(next) => Some((SlotKind::Interpolated, current, Some(next), alpha)),
+            None => Some((SlotKind::Repeated, current, None, 0.0)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: fn(u64) -> Duration = Duration::from_millis;
+
+    fn frame(id: u64, ready_ms: u64) -> FrameReady {
+        FrameReady {
+            id,
+            sim_time: id as f64 / 30.0,
+            host_processing: MS(5),
+            received_at: MS(ready_ms.saturating_sub(2)),
+            ready_at: MS(ready_ms),
+        }
+    }
+
+    /// A 30 fps source whose frame k is ready at 33k + offset ms, a
+    /// display at 60 Hz (vsync every 16.667 ms), run for `vsyncs` slots.
+    fn run(policy: Policy, offset: u64, vsyncs: u64, skip: &[u64]) -> (Vec<Slot>, Drops) {
+        let config = ScheduleConfig {
+            max_alpha: 1.5,
+            ..ScheduleConfig::multiple(policy, 30.0, 1)
+        };
+        let mut s = Scheduler::new(config);
+        let di = config.display_interval;
+        let mut slots = Vec::new();
+        let mut next_frame = 0u64;
+        for v in 0..vsyncs {
+            let now = di * v as u32;
+            while frame(next_frame, 0).sim_time * 1000.0 + offset as f64
+                <= now.as_secs_f64() * 1000.0
+            {
+                let ready = (next_frame as f64 * 1000.0 / 30.0) as u64 + offset;
+                if !skip.contains(&next_frame) {
+                    s.frame_ready(frame(next_frame, ready));
+                }
+                next_frame += 1;
+            }
+            if let Some(slot) = s.vsync(now) {
+                slots.push(slot);
+            }
+        }
+        (slots, s.drops())
+    }
+
+    #[test]
+    fn extrapolation_shows_each_frame_at_the_first_vsync_after_it_is_ready() {
+        let (slots, drops) = run(Policy::Extrapolate, 3, 60, &[]);
+        let di = Duration::from_secs_f64(1.0 / 60.0);
+        for s in slots.iter().filter(|s| s.kind == SlotKind::Rendered) {
+            let wait = s.vsync - s.source.ready_at;
+            assert!(wait <= di, "frame {} waited {wait:?}", s.source.id);
+        }
+        // Every other slot is extrapolated at α = 1/2.
+        let extrapolated: Vec<_> = slots
+            .iter()
+            .filter(|s| s.kind == SlotKind::Extrapolated)
+            .collect();
+        assert!(extrapolated.len() >= 28);
+        assert!(extrapolated.iter().all(|s| (s.alpha - 0.5).abs() < 0.01));
+        assert_eq!(drops, Drops::default());
+    }
+
+    #[test]
+    fn every_vsync_slot_is_filled_exactly_once() {
+        for policy in [Policy::Repeat, Policy::Extrapolate, Policy::Interpolate] {
+            let (slots, _) = run(policy, 3, 90, &[7]);
+            let ids: Vec<u64> = slots.iter().map(|s| s.display_id).collect();
+            assert_eq!(ids, (0..ids.len() as u64).collect::<Vec<_>>(), "{policy:?}");
+            for pair in slots.windows(2) {
+                assert!(pair[1].vsync > pair[0].vsync, "{policy:?}");
+            }
+            // Once started, no vsync is skipped.
+            let first = slots[0].vsync;
+            let di = Duration::from_secs_f64(1.0 / 60.0);
+            let expected = ((slots.last().unwrap().vsync - first).as_secs_f64() / di.as_secs_f64())
+                .round() as usize
+                + 1;
+            assert_eq!(slots.len(), expected, "{policy:?}");
+        }
+    }
+
+    #[test]
+    fn interpolation_adds_at_least_one_render_interval() {
+        let (slots, drops) = run(Policy::Interpolate, 3, 90, &[]);
+        let ri = Duration::from_secs_f64(1.0 / 30.0);
+        let rendered: Vec<_> = slots
+            .iter()
+            .filter(|s| s.kind == SlotKind::Rendered)
+            .collect();
+        assert!(rendered.len() >= 40);
+        for s in &rendered {
+            let wait = s.vsync - s.source.ready_at;
+            assert!(
+                wait + Duration::from_millis(1) >= ri,
+                "frame {} waited only {wait:?}",
+                s.source.id
+            );
+        }
+        let interpolated: Vec<_> = slots
+            .iter()
+            .filter(|s| s.kind == SlotKind::Interpolated)
+            .collect();
+        assert!(interpolated.len() >= 40);
+        assert!(
+            interpolated
+                .iter()
+                .all(|s| s.next.unwrap().id == s.source.id + 1)
+        );
+        assert!(interpolated.iter().all(|s| (s.alpha - 0.5).abs() < 0.01));
+        assert_eq!(drops, Drops::default());
+    }
+
+    #[test]
+    fn a_late_frame_is_covered_by_extrapolation_then_a_hold() {
+        // Frames 5..=7 never arrive: after frame 4 the slots extrapolate
+        // past α = 1 up to the limit (1.5), then hold frame 4.
+        let (slots, drops) = run(Policy::Extrapolate, 3, 40, &[5, 6, 7]);
+        let after: Vec<_> = slots.iter().filter(|s| s.source.id == 4).collect();
+        let alphas: Vec<f64> = after
+            .iter()
+            .filter(|s| s.kind == SlotKind::Extrapolated)
+            .map(|s| s.alpha)
+            .collect();
+        assert!(alphas.iter().any(|&a| a > 1.0 && a <= 1.5), "{alphas:?}");
+        assert!(after.iter().any(|s| s.kind == SlotKind::Repeated));
+        assert_eq!(drops.network, 3);
+        // Frame 8 is shown as soon as it is ready.
+        let f8 = slots.iter().find(|s| s.source.id == 8).unwrap();
+        assert_eq!(f8.kind, SlotKind::Rendered);
+    }
+
+    #[test]
+    fn superseded_and_out_of_order_frames_are_counted() {
+        let config = ScheduleConfig::multiple(Policy::Extrapolate, 30.0, 1);
+        let mut s = Scheduler::new(config);
+        s.frame_ready(frame(0, 0));
+        s.frame_ready(frame(1, 1));
+        let slot = s.vsync(MS(2)).unwrap();
+        assert_eq!(slot.source.id, 1);
+        assert_eq!(s.drops().scheduler, 1);
+        s.frame_ready(frame(1, 3));
+        assert_eq!(s.drops().late, 1);
+        s.frame_ready(frame(4, 4));
+        assert_eq!(s.drops().network, 2);
+    }
+}

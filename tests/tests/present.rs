@@ -1,0 +1,112 @@
+//! The presenter end to end: an in-process server renders a built-in scene
+//! live, the client connects over QUIC on loopback, generates frames and
+//! presents them headless; the accounting must show the scheduling model's
+//! properties. Bounds are frame counts and ratios, never absolute times.
+
+use std::time::Duration;
+
+use client::present::{PresentConfig, run_headless};
+use framegen::Method;
+use framegen::schedule::SlotKind;
+use protocol::FrameSize;
+
+const SIZE: FrameSize = FrameSize::new(160, 90);
+
+static ALONE: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// Presents `method` for `seconds`. The timing properties are checked on
+/// the CPU reference backend: on this project's CI machines the only wgpu
+/// adapter is lavapipe, which shares two cores with the in-process server's
+/// renderer and misses most vsyncs (the scheduling itself does not depend
+/// on the backend); `gpu` runs the wgpu backend for a smoke check.
+async fn present(method: Method, seconds: f64, gpu: bool) -> client::present::Report {
+    // One presenter at a time: each runs a server and a client on a machine
+    // with two cores.
+    let _alone = ALONE.lock().await;
+    let local = client::demo::start_local("builtin:default", SIZE, 30.0).unwrap();
+    let mut session = local.connect().await.unwrap();
+    let config = PresentConfig {
+        method,
+        duration: Duration::from_secs_f64(seconds),
+        cpu: !gpu,
+        ..PresentConfig::default()
+    };
+    let ctx = gpu.then(|| client::demo::gpu().unwrap());
+    let report = run_headless(&mut session, &config, ctx).await.unwrap();
+    session.close().await;
+    local.server.shutdown().await;
+    report
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn extrapolation_fills_every_slot_without_adding_latency() {
+    let r = present(Method::Gffe, 3.0, false).await;
+    let s = &r.summary;
+    eprintln!("{}", s.to_text());
+    eprintln!(
+        "received {}, missed {}, generation {:?}",
+        r.received, r.missed_vsyncs, r.generation_ms
+    );
+    assert!((r.display_fps - 60.0).abs() < 0.01);
+    // Every vsync from the first shown frame to the end is presented or
+    // counted as missed, exactly once.
+    let first = r.records.first().expect("something was shown");
+    let slots = ((3000.0 - first.present_ms) / (1000.0 / 60.0)).floor() as i64 + 1;
+    let accounted = r.records.len() as i64 + r.missed_vsyncs as i64;
+    assert!(
+        (accounted - slots).abs() <= 2,
+        "{accounted} accounted vs {slots} slots"
+    );
+    let ids: Vec<u64> = r.records.iter().map(|x| x.display_id).collect();
+    assert_eq!(ids, (0..ids.len() as u64).collect::<Vec<_>>());
+    // Most slots are presented (the machine may miss a few under load).
+    assert!(
+        r.records.len() as f64 >= 0.6 * slots as f64,
+        "{} of {slots}",
+        r.records.len()
+    );
+    // Rendered frames and extrapolated frames alternate: about as many of each.
+    assert!(
+        s.rendered >= 30 && s.extrapolated >= s.rendered / 2,
+        "{s:?}"
+    );
+    // No added latency beyond one vsync quantum plus the generation time
+    // (rounded up to vsyncs): median ≤ 2 vsyncs.
+    assert!(
+        s.added_latency_ms.p50 <= 2.0 * 1000.0 / 60.0 + 0.5,
+        "{:?}",
+        s.added_latency_ms
+    );
+    assert!(r.records.iter().all(|x| x.latency_ms >= 0.0));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn repeat_shows_only_rendered_and_repeated_frames() {
+    let r = present(Method::Repeat, 2.0, false).await;
+    let kinds: std::collections::HashSet<SlotKind> = r.records.iter().map(|x| x.kind).collect();
+    assert!(
+        kinds
+            .iter()
+            .all(|k| matches!(k, SlotKind::Rendered | SlotKind::Repeated))
+    );
+    assert!(
+        r.summary.rendered >= 20 && r.summary.repeated >= 10,
+        "{:?}",
+        r.summary
+    );
+}
+
+/// The wgpu backend in the same loop: it runs and accounts every slot it
+/// presents (how many it keeps up with depends on the adapter).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_wgpu_backend_presents_generated_frames() {
+    let r = present(Method::Gffe, 2.0, true).await;
+    assert!(r.backend.starts_with("wgpu"), "{}", r.backend);
+    assert!(
+        r.summary.rendered >= 1 && r.summary.extrapolated >= 1,
+        "{:?}",
+        r.summary
+    );
+    let slots = (2000.0f64 / (1000.0 / 60.0)).floor() as i64 + 1;
+    assert!((r.records.len() as i64 + r.missed_vsyncs as i64 - slots).abs() <= 1);
+}
