@@ -63,8 +63,12 @@ pub fn policy_of(method: Method) -> Policy {
     match method {
         Method::Repeat => Policy::Repeat,
         Method::Reproject | Method::Gffe => Policy::Extrapolate,
+        Method::Interp => Policy::Interpolate,
     }
 }
+
+/// Rendered frames kept for rendered slots and interpolation pairs.
+const KEPT: usize = 6;
 
 /// How long to wait for a session's first frame.
 pub const FIRST_FRAME_TIMEOUT: Duration = Duration::from_secs(60);
@@ -146,6 +150,8 @@ pub async fn run_headless(
         ready_at: Duration::ZERO,
     });
     // Rendered frames that may still be shown (the newest few).
+    let lazy = policy == Policy::Interpolate;
+    let mut pushed = Some(first.meta.index);
     let mut kept: VecDeque<Frame> = VecDeque::from([first]);
     let (mut generation, mut ingest) = (Vec::new(), Vec::new());
     let (mut received, mut missed) = (1u64, 0u64);
@@ -164,10 +170,13 @@ pub async fn run_headless(
             arrived.push((frame, clock()));
         }
         received += arrived.len() as u64;
-        if let Some((newest, _)) = arrived.last() {
+        // Extrapolation generates from the newest frame at once;
+        // interpolation pushes a pair when a slot between them comes up.
+        if let Some((newest, _)) = arrived.last().filter(|_| !lazy) {
             let t = Instant::now();
             tokio::task::block_in_place(|| generator.push(newest))?;
             ingest.push(t.elapsed().as_secs_f64() * 1e3);
+            pushed = Some(newest.meta.index);
         }
         let ready_at = clock();
         for (frame, received_at) in arrived {
@@ -179,11 +188,24 @@ pub async fn run_headless(
                 ready_at,
             });
             kept.push_back(frame);
-            if kept.len() > 4 {
+            if kept.len() > KEPT {
                 kept.pop_front();
             }
         }
         if let Some(slot) = scheduler.vsync(vsync) {
+            if let (SlotKind::Interpolated, Some(next)) = (slot.kind, slot.next) {
+                for id in [slot.source.id, next.id] {
+                    if pushed.is_some_and(|p| p >= id) {
+                        continue;
+                    }
+                    if let Some(f) = kept.iter().find(|f| f.meta.index == id) {
+                        let t = Instant::now();
+                        tokio::task::block_in_place(|| generator.push(f))?;
+                        ingest.push(t.elapsed().as_secs_f64() * 1e3);
+                        pushed = Some(id);
+                    }
+                }
+            }
             let (image, ready_at) = produce(&slot, &mut generator, &kept, &mut generation, start)?;
             if let (Some(dir), Some(image)) = (&config.png_dir, image) {
                 write_png(dir, slot.display_id, &image)?;

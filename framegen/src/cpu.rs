@@ -8,6 +8,7 @@ use crate::FramegenError;
 use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
 use crate::gffe::{background, bgfill, history, holes, motion, warp, window};
 use crate::input::Prepared;
+use crate::interp::{reproject, resolve};
 use crate::levels::Levels;
 use crate::output::Output;
 use crate::settings::Method;
@@ -28,6 +29,8 @@ struct FrameState {
 #[derive(Debug, Default)]
 pub struct CpuBackend {
     current: Option<FrameState>,
+    /// The frame before `current` (interpolation's α = 0).
+    previous: Option<FrameState>,
     timings: Vec<PassTime>,
 }
 
@@ -89,6 +92,7 @@ impl Backend for CpuBackend {
             )
         });
         let dynamic = hist.dynamic;
+        self.previous = prev;
         self.current = Some(FrameState {
             camera: plan.camera,
             frame: frame.clone(),
@@ -104,6 +108,9 @@ impl Backend for CpuBackend {
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         let t = &mut self.timings;
         t.retain(|p| matches!(p.pass, Pass::History | Pass::Background));
+        if job.method == Method::Interp {
+            return Ok(interpolate(cur, self.previous.as_ref(), job, t));
+        }
         if job.method == Method::Repeat {
             let mut out = timed(t, Pass::Crop, || {
                 window::crop(
@@ -155,6 +162,7 @@ impl Backend for CpuBackend {
 
     fn reset(&mut self) {
         self.current = None;
+        self.previous = None;
     }
 
     fn timings(&self) -> Vec<PassTime> {
@@ -172,4 +180,51 @@ impl Backend for CpuBackend {
             background: c.background.clone(),
         }))
     }
+}
+
+/// GeoMotionGen between `previous` and `current` (module `interp`). Without
+/// a previous frame of the same size (first frame, restart, size change)
+/// the current frame is shown as it is.
+fn interpolate(
+    cur: &FrameState,
+    previous: Option<&FrameState>,
+    job: &Job,
+    t: &mut Vec<PassTime>,
+) -> Output {
+    let (w, h) = (cur.camera.width(), cur.camera.height());
+    let f = &cur.frame;
+    let Some(prev) = previous.filter(|p| p.frame.depth.len() == f.depth.len()) else {
+        let identity = window::Crop {
+            source: (w, h),
+            origin: glam::Vec2::ZERO,
+            extent: glam::Vec2::new(w as f32, h as f32),
+            output: (w, h),
+        };
+        return timed(t, Pass::Crop, || {
+            window::crop(&f.color, &f.depth, &f.motion, &identity)
+        });
+    };
+    let mut out = timed(t, Pass::Reproject, || {
+        let uv = reproject::normalize(&f.motion, w, h);
+        let cands = reproject::project(&uv, &f.depth, w, h, job.alpha);
+        let winners = splat::resolve(&cands, f.depth.len());
+        let mut out = Output::empty(w, h);
+        reproject::merge(&winners, &uv, &f.depth, &mut out);
+        out
+    });
+    timed(t, Pass::Holes, || holes::fill(&mut out, job.pushpull));
+    timed(t, Pass::Resolve, || {
+        let (current, previous) = (
+            resolve::Image {
+                color: &cur.frame.color,
+                depth: &cur.frame.depth,
+            },
+            resolve::Image {
+                color: &prev.frame.color,
+                depth: &prev.frame.depth,
+            },
+        );
+        resolve::resolve(&mut out, current, previous, job.alpha);
+    });
+    out
 }

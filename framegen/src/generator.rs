@@ -49,6 +49,10 @@ pub enum Pass {
     Holes,
     /// Window crop (repeat).
     Crop,
+    /// GeoMotionGen normalize + reproject + merge.
+    Reproject,
+    /// GeoMotionGen resolve.
+    Resolve,
     /// (GPU) reading the generated frame back.
     Readback,
 }
@@ -65,6 +69,8 @@ impl Pass {
             Pass::BgFill => "bgfill",
             Pass::Holes => "holes",
             Pass::Crop => "crop",
+            Pass::Reproject => "reproject",
+            Pass::Resolve => "resolve",
             Pass::Readback => "readback",
         }
     }
@@ -421,13 +427,18 @@ impl FrameGenerator {
         alpha: f64,
         source: CameraSource,
     ) -> Result<Generated, FramegenError> {
-        if !(alpha.is_finite() && alpha >= 0.0 && alpha <= self.settings.max_alpha) {
-            return Err(FramegenError::Alpha(alpha, self.settings.max_alpha));
+        let interp = self.settings.method == Method::Interp;
+        let max_alpha = if interp { 1.0 } else { self.settings.max_alpha };
+        if !(alpha.is_finite() && alpha >= 0.0 && alpha <= max_alpha) {
+            return Err(FramegenError::Alpha(alpha, max_alpha));
         }
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        // Interpolation runs between the previous frame (α = 0) and the
+        // current one (α = 1): eq. 2 with α − 1 is the linear interpolation.
+        let along = if interp { alpha - 1.0 } else { alpha };
         let pose = match source {
             CameraSource::Extrapolated => match &cur.prev_pose {
-                Some(prev) => Pose::extrapolate(prev, &cur.meta.camera.pose, alpha),
+                Some(prev) => Pose::extrapolate(prev, &cur.meta.camera.pose, along),
                 None => cur.meta.camera.pose,
             },
             CameraSource::Given(pose) => {
@@ -435,12 +446,21 @@ impl FrameGenerator {
                 pose.normalized()
             }
         };
+        // Interpolation works on the rendered grid (its window included).
         let camera = Camera {
             pose,
             projection: cur.meta.camera.projection,
-            window: Window::FULL,
+            window: if interp {
+                cur.meta.camera.window
+            } else {
+                Window::FULL
+            },
         };
-        let (dw, dh) = cur.display;
+        let (dw, dh) = if interp {
+            (cur.meta.size.width, cur.meta.size.height)
+        } else {
+            cur.display
+        };
         let size = FrameSize {
             width: dw,
             height: dh,
@@ -472,7 +492,7 @@ impl FrameGenerator {
         };
         let meta = FrameMeta {
             index: cur.meta.index,
-            time: cur.meta.time + alpha * interval,
+            time: cur.meta.time + along * interval,
             camera,
             size,
             host_processing: Duration::ZERO,
@@ -554,5 +574,6 @@ pub fn passes_of(method: Method, levels: u32) -> Vec<Pass> {
             vec![Pass::Motion, Pass::Warp, Pass::BgFill, Pass::Holes]
         }
         Method::Gffe => vec![Pass::Motion, Pass::Warp, Pass::Holes],
+        Method::Interp => vec![Pass::Reproject, Pass::Holes, Pass::Resolve],
     }
 }

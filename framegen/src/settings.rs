@@ -15,11 +15,22 @@ pub enum Method {
     Reproject,
     /// G-buffer-free frame extrapolation, GFFE §4.1–4.3.
     Gffe,
+    /// GeoMotionGen interpolation between the previous and the current
+    /// rendered frame (seed 003); α ∈ [0, 1], adds latency.
+    Interp,
 }
 
 impl Method {
     /// Every method, baselines first.
-    pub const ALL: [Method; 3] = [Method::Repeat, Method::Reproject, Method::Gffe];
+    pub const ALL: [Method; 4] = [
+        Method::Repeat,
+        Method::Reproject,
+        Method::Gffe,
+        Method::Interp,
+    ];
+
+    /// The extrapolating methods (no added latency), baselines first.
+    pub const EXTRAPOLATING: [Method; 3] = [Method::Repeat, Method::Reproject, Method::Gffe];
 
     /// The name used on command lines and in reports.
     pub fn name(self) -> &'static str {
@@ -27,6 +38,7 @@ impl Method {
             Method::Repeat => "repeat",
             Method::Reproject => "reproject",
             Method::Gffe => "gffe",
+            Method::Interp => "interp",
         }
     }
 }
@@ -43,7 +55,7 @@ impl std::str::FromStr for Method {
         Method::ALL
             .into_iter()
             .find(|m| m.name() == s)
-            .ok_or_else(|| format!("unknown method {s:?} (repeat, reproject, gffe)"))
+            .ok_or_else(|| format!("unknown method {s:?} (repeat, reproject, gffe, interp)"))
     }
 }
 

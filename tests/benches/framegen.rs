@@ -1,4 +1,5 @@
-//! Per-pass times of the GFFE pipeline (and the baselines' totals) on the
+//! Per-pass times of the GFFE and GeoMotionGen pipelines (and every
+//! method's total) on the
 //! CPU reference and on wgpu, at 720p on the default scene.
 //!
 //! wgpu times are wall time of submit + wait per pass (the profiled
@@ -69,42 +70,54 @@ fn bench(c: &mut Criterion) {
             .sample_size(10)
             .warm_up_time(Duration::from_secs(1))
             .measurement_time(Duration::from_secs(if gpu { 4 } else { 8 }));
-        let mut g = make(Method::Gffe);
+        let per_pass = [
+            (
+                Method::Gffe,
+                vec![
+                    Pass::Upload,
+                    Pass::History,
+                    Pass::Background,
+                    Pass::Motion,
+                    Pass::Warp,
+                    Pass::BgFill,
+                    Pass::Holes,
+                    Pass::Readback,
+                ],
+            ),
+            (
+                Method::Interp,
+                vec![Pass::Reproject, Pass::Holes, Pass::Resolve],
+            ),
+        ];
         let mut feed = Feed {
             frames: frames.clone(),
             next: 0,
         };
-        for _ in 0..3 {
-            run(&mut g, &mut feed);
-        }
-        for pass in [
-            Pass::Upload,
-            Pass::History,
-            Pass::Background,
-            Pass::Motion,
-            Pass::Warp,
-            Pass::BgFill,
-            Pass::Holes,
-            Pass::Readback,
-        ] {
-            if !gpu && matches!(pass, Pass::Upload | Pass::Readback) {
-                continue;
+        for (method, passes) in per_pass {
+            let mut g = make(method);
+            for _ in 0..3 {
+                run(&mut g, &mut feed);
             }
-            group.bench_function(format!("gffe/{}", pass.name()), |b| {
-                b.iter_custom(|iters| {
-                    let mut total = Duration::ZERO;
-                    for _ in 0..iters {
-                        run(&mut g, &mut feed);
-                        total += g
-                            .timings()
-                            .iter()
-                            .filter(|t| t.pass == pass)
-                            .map(|t| t.time)
-                            .sum::<Duration>();
-                    }
-                    total
-                })
-            });
+            for pass in passes {
+                if !gpu && matches!(pass, Pass::Upload | Pass::Readback) {
+                    continue;
+                }
+                group.bench_function(format!("{method}/{}", pass.name()), |b| {
+                    b.iter_custom(|iters| {
+                        let mut total = Duration::ZERO;
+                        for _ in 0..iters {
+                            run(&mut g, &mut feed);
+                            total += g
+                                .timings()
+                                .iter()
+                                .filter(|t| t.pass == pass)
+                                .map(|t| t.time)
+                                .sum::<Duration>();
+                        }
+                        total
+                    })
+                });
+            }
         }
         for method in Method::ALL {
             let mut g = make(method);

@@ -166,9 +166,17 @@ pub struct Quality {
 pub fn quality(generator: &mut framegen::FrameGenerator, frames: &[Frame]) -> Quality {
     let (mut psnr, mut ssim, mut filled, mut background, mut count) = (0.0, 0.0, 0.0, 0.0, 0usize);
     let fed = framegen::decimate::decimate(frames, 2);
+    // Extrapolation stands in for the frame after the last fed one;
+    // interpolation for the frame before it.
+    let interp = generator.settings().method == framegen::Method::Interp;
     for (i, frame) in fed.iter().enumerate() {
         generator.push(frame).expect("push");
-        let Some(truth) = frames.get(2 * i + 1) else {
+        let truth_index = if interp {
+            2 * i - usize::from(i > 0)
+        } else {
+            2 * i + 1
+        };
+        let Some(truth) = frames.get(truth_index) else {
             break;
         };
         if i < 1 {

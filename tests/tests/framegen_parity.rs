@@ -337,7 +337,13 @@ fn whole_pipeline_matches() {
                     "{scene} {method}"
                 );
             }
-            for alpha in [0.5, 2.0] {
+            // Interpolation lives in [0, 1].
+            let alphas: &[f64] = if method == Method::Interp {
+                &[0.5, 1.0]
+            } else {
+                &[0.5, 2.0]
+            };
+            for &alpha in alphas {
                 let a = cpu.generate(alpha).unwrap();
                 let b = gpu.generate(alpha).unwrap();
                 let n = a.mask.len();

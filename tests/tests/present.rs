@@ -110,3 +110,38 @@ async fn the_wgpu_backend_presents_generated_frames() {
     let slots = (2000.0f64 / (1000.0 / 60.0)).floor() as i64 + 1;
     assert!((r.records.len() as i64 + r.missed_vsyncs as i64 - slots).abs() <= 1);
 }
+
+/// Interpolation holds each rendered frame back until the frames between
+/// it and the one before are shown: every rendered frame is shown at least
+/// one render interval (two vsyncs at 30 -> 60) after a direct display
+/// would have shown it, and the slots between alternate with interpolated
+/// frames.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn interpolation_adds_at_least_one_render_interval() {
+    let r = present(Method::Interp, 3.0, false).await;
+    let s = &r.summary;
+    eprintln!("{}", s.to_text());
+    assert!(
+        s.rendered >= 30 && s.interpolated >= s.rendered / 2,
+        "{s:?}"
+    );
+    let interval = 1000.0 / 30.0;
+    // Under load a slot can be late, never early: the bound is a floor.
+    let added: Vec<f64> = r
+        .records
+        .iter()
+        .filter_map(|x| x.added_latency_ms)
+        .collect();
+    let at_least = added.iter().filter(|&&a| a >= interval - 0.5).count();
+    assert!(
+        at_least as f64 >= 0.95 * added.len() as f64,
+        "{:?}",
+        s.added_latency_ms
+    );
+    assert!(
+        r.records
+            .iter()
+            .filter(|x| x.kind == SlotKind::Interpolated)
+            .all(|x| x.next == Some(x.source + 1) && x.alpha > 0.0 && x.alpha < 1.0)
+    );
+}

@@ -8,7 +8,8 @@
 //! * **pull**: level `k + 1` is the weight-normalised mean of its (up to)
 //!   four children, with weight `min(1, Σw)`.
 //! * **push**: from the coarsest level down, a texel of weight `w < 1`
-//!   becomes `w·own + (1 − w)·parent`, the parent sampled bilinearly.
+//!   becomes `w·own + (1 − w)·parent`, the parent sampled bilinearly with
+//!   each tap weighted by its own weight (empty texels do not count).
 //! * **resolve**: holes take level 0's value and are flagged
 //!   [`FILLED`]; if the whole frame was empty they become black sky.
 
@@ -91,7 +92,10 @@ pub fn pull(pyramid: &mut [Texel], levels: Levels, k: u32) {
     }
 }
 
-/// Bilinear sample of level `k` at level-`k` continuous position `p`.
+/// Weighted bilinear sample of level `k` at level-`k` continuous position
+/// `p`: each tap counts with its bilinear weight times its own weight, so
+/// empty texels do not drag the value toward zero; the returned weight is
+/// the bilinear blend of the taps' weights.
 fn sample(pyramid: &[Texel], levels: Levels, k: u32, p: Vec2) -> (Vec4, Vec4) {
     let (w, h) = levels.size(k);
     let o = levels.offset(k) as usize;
@@ -104,13 +108,25 @@ fn sample(pyramid: &[Texel], levels: Levels, k: u32, p: Vec2) -> (Vec4, Vec4) {
         let t = pyramid[o + (yi * w + xi) as usize];
         (Vec4::from_array(t.a), Vec4::from_array(t.b))
     };
-    let (a00, b00) = at(base.x, base.y);
-    let (a10, b10) = at(base.x + 1.0, base.y);
-    let (a01, b01) = at(base.x, base.y + 1.0);
-    let (a11, b11) = at(base.x + 1.0, base.y + 1.0);
-    let a = (a00 * (1.0 - f.x) + a10 * f.x) * (1.0 - f.y) + (a01 * (1.0 - f.x) + a11 * f.x) * f.y;
-    let b = (b00 * (1.0 - f.x) + b10 * f.x) * (1.0 - f.y) + (b01 * (1.0 - f.x) + b11 * f.x) * f.y;
-    (a, b)
+    let taps = [
+        ((1.0 - f.x) * (1.0 - f.y), at(base.x, base.y)),
+        (f.x * (1.0 - f.y), at(base.x + 1.0, base.y)),
+        ((1.0 - f.x) * f.y, at(base.x, base.y + 1.0)),
+        (f.x * f.y, at(base.x + 1.0, base.y + 1.0)),
+    ];
+    let (mut sw, mut sa, mut sb) = (0.0f32, Vec4::ZERO, Vec4::ZERO);
+    for (bw, (a, b)) in taps {
+        let wt = bw * a.w;
+        sw += wt;
+        sa += a * wt;
+        sb += b * wt;
+    }
+    if sw > 0.0 {
+        let a = sa / sw;
+        (Vec4::new(a.x, a.y, a.z, sw), sb / sw)
+    } else {
+        (Vec4::ZERO, Vec4::ZERO)
+    }
 }
 
 /// CPU reference of `pp_push` from level `k + 1` into level `k`.

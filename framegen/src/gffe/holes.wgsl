@@ -88,12 +88,29 @@ fn pp_push(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     let q = p - 0.5;
     let base = floor(q);
     let f = q - base;
-    let t00 = at(base.x, base.y);
-    let t10 = at(base.x + 1.0, base.y);
-    let t01 = at(base.x, base.y + 1.0);
-    let t11 = at(base.x + 1.0, base.y + 1.0);
-    let pa = (t00.a * (1.0 - f.x) + t10.a * f.x) * (1.0 - f.y) + (t01.a * (1.0 - f.x) + t11.a * f.x) * f.y;
-    let pb = (t00.b * (1.0 - f.x) + t10.b * f.x) * (1.0 - f.y) + (t01.b * (1.0 - f.x) + t11.b * f.x) * f.y;
+    // Weighted bilinear: each tap counts with its own weight (see holes.rs).
+    var taps = array<PpTexel, 4>(
+        at(base.x, base.y),
+        at(base.x + 1.0, base.y),
+        at(base.x, base.y + 1.0),
+        at(base.x + 1.0, base.y + 1.0),
+    );
+    var bws = array<f32, 4>((1.0 - f.x) * (1.0 - f.y), f.x * (1.0 - f.y), (1.0 - f.x) * f.y, f.x * f.y);
+    var sw = 0.0;
+    var sa = vec4<f32>(0.0);
+    var sb = vec4<f32>(0.0);
+    for (var j = 0; j < 4; j++) {
+        let wt = bws[j] * taps[j].a.w;
+        sw += wt;
+        sa += taps[j].a * wt;
+        sb += taps[j].b * wt;
+    }
+    var pa = vec4<f32>(0.0);
+    var pb = vec4<f32>(0.0);
+    if sw > 0.0 {
+        pa = vec4<f32>((sa / sw).xyz, sw);
+        pb = sb / sw;
+    }
     let a = own.a * wgt + pa * (1.0 - wgt);
     let b = own.b * wgt + pb * (1.0 - wgt);
     pyramid[pp.dst.x + i] = PpTexel(vec4<f32>(a.xyz, wgt + (1.0 - wgt) * pa.w), b);

@@ -14,6 +14,7 @@ use glam::Vec2;
 use crate::camera::pixel_center;
 use crate::gpu::{Binding, GpuContext, Kernel};
 use crate::output::{COPIED, Output};
+use crate::sample::{bilinear, clamp_index};
 
 /// Where the displayed region lies in the rendered image.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,12 +42,6 @@ impl Crop {
     }
 }
 
-fn clamp_index(p: Vec2, w: u32, h: u32) -> usize {
-    let x = (p.x.max(0.0) as u32).min(w - 1);
-    let y = (p.y.max(0.0) as u32).min(h - 1);
-    (y * w + x) as usize
-}
-
 /// CPU reference of `crop`.
 pub fn crop(color: &[[f32; 4]], depth: &[f32], motion: &[[f32; 2]], c: &Crop) -> Output {
     let (w, h) = c.source;
@@ -54,14 +49,7 @@ pub fn crop(color: &[[f32; 4]], depth: &[f32], motion: &[[f32; 2]], c: &Crop) ->
     let scale = c.scale();
     for t in 0..out.mask.len() {
         let s = c.source_of(t);
-        let q = s - 0.5;
-        let base = q.floor();
-        let f = q - base;
-        let at = |dx: f32, dy: f32| {
-            glam::Vec4::from_array(color[clamp_index(base + Vec2::new(dx, dy), w, h)])
-        };
-        let rgb = (at(0.0, 0.0) * (1.0 - f.x) + at(1.0, 0.0) * f.x) * (1.0 - f.y)
-            + (at(0.0, 1.0) * (1.0 - f.x) + at(1.0, 1.0) * f.x) * f.y;
+        let rgb = bilinear(color, w, h, s);
         let nearest = clamp_index(s, w, h);
         out.color[t] = [rgb.x, rgb.y, rgb.z, 1.0];
         out.depth[t] = depth[nearest];

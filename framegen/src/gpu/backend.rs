@@ -16,9 +16,11 @@ use crate::gffe::history::{GpuHistory, GpuHistoryBuffers};
 use crate::gffe::holes::{self, GpuHoles, Texel as PpTexel};
 use crate::gffe::motion::GpuMotion;
 use crate::gffe::warp::{GpuOutput, GpuWarp};
-use crate::gffe::window::GpuCrop;
+use crate::gffe::window::{Crop, GpuCrop};
 use crate::gpu::GpuContext;
 use crate::input::Prepared;
+use crate::interp::reproject::GpuReproject;
+use crate::interp::resolve::{GpuImage, GpuResolve};
 use crate::levels::Levels;
 use crate::output::Output;
 use crate::settings::Method;
@@ -35,6 +37,8 @@ struct Kernels {
     bgfill: GpuBgFill,
     holes: GpuHoles,
     crop: GpuCrop,
+    interp: GpuReproject,
+    resolve: GpuResolve,
 }
 
 /// One ingested frame on the GPU.
@@ -164,6 +168,8 @@ impl GpuBackend {
             bgfill: GpuBgFill::new(c),
             holes: GpuHoles::new(c),
             crop: GpuCrop::new(c),
+            interp: GpuReproject::new(c),
+            resolve: GpuResolve::new(c),
         };
         Self {
             ctx,
@@ -336,7 +342,10 @@ impl Backend for GpuBackend {
         let (tw, th) = (job.target.width(), job.target.height());
         let tn = tw * th;
         let Self {
-            kernels, scratch, ..
+            kernels,
+            scratch,
+            spare,
+            ..
         } = self;
         let out_color = ensure(ctx, &mut scratch.color, "out color", u64::from(tn) * 16).clone();
         let out_depth = ensure(ctx, &mut scratch.depth, "out depth", u64::from(tn) * 4).clone();
@@ -379,7 +388,75 @@ impl Backend for GpuBackend {
             encoder: None,
             timings: &mut self.timings,
         };
-        if job.method == Method::Repeat {
+        // The frame before `cur`, for interpolation (the ingest keeps it as
+        // the spare until the next frame arrives).
+        let previous = spare.as_ref().filter(|p| p.n == cur.n);
+        if job.method == Method::Interp && previous.is_none() {
+            let (w, h) = (cur.camera.width(), cur.camera.height());
+            let identity = Crop {
+                source: (w, h),
+                origin: glam::Vec2::ZERO,
+                extent: glam::Vec2::new(w as f32, h as f32),
+                output: (w, h),
+            };
+            rec.pass(Pass::Crop, |enc| {
+                kernels.crop.encode(
+                    ctx,
+                    enc,
+                    &identity,
+                    &cur.color,
+                    &cur.depth,
+                    &cur.motion,
+                    out,
+                );
+            })?;
+        } else if let (Method::Interp, Some(prev)) = (job.method, previous) {
+            let size = (cur.camera.width(), cur.camera.height());
+            rec.pass(Pass::Reproject, |enc| {
+                kernels.interp.encode_project(
+                    ctx,
+                    enc,
+                    size,
+                    job.alpha,
+                    &cur.motion,
+                    &cur.depth,
+                    &next,
+                    &candidates,
+                );
+                kernels.splat.encode(
+                    ctx,
+                    enc,
+                    &candidates,
+                    u64::from(cur.n),
+                    &keys,
+                    &winners,
+                    u64::from(cur.n),
+                );
+                kernels
+                    .interp
+                    .encode_merge(ctx, enc, size, &cur.depth, &winners, &next, out);
+            })?;
+            rec.pass(Pass::Holes, |enc| {
+                kernels.holes.encode(ctx, enc, out, &pyramid, layout);
+            })?;
+            rec.pass(Pass::Resolve, |enc| {
+                kernels.resolve.encode(
+                    ctx,
+                    enc,
+                    size,
+                    job.alpha,
+                    GpuImage {
+                        color: &cur.color,
+                        depth: &cur.depth,
+                    },
+                    GpuImage {
+                        color: &prev.color,
+                        depth: &prev.depth,
+                    },
+                    out,
+                );
+            })?;
+        } else if job.method == Method::Repeat {
             rec.pass(Pass::Crop, |enc| {
                 kernels.crop.encode(
                     ctx,

@@ -1,0 +1,159 @@
+//! GeoMotionGen passes 2–4 (seed 003): normalize, reproject, merge. See the
+//! module docs of [`crate::interp`] for the conventions chosen.
+
+use glam::Vec2;
+
+use crate::camera::{cell, pixel_center};
+use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::output::{Output, WARPED};
+use crate::splat::{Candidate, Winners, depth_key};
+
+/// Pass 2: motion in pixels → motion in uv (pixels / size, y down).
+pub fn normalize(motion: &[[f32; 2]], width: u32, height: u32) -> Vec<[f32; 2]> {
+    let (w, h) = (width as f32, height as f32);
+    motion.iter().map(|m| [m[0] / w, m[1] / h]).collect()
+}
+
+/// Pass 3: where each current pixel is at α (0 = previous frame, 1 =
+/// current): `x + (1 − α)·m`, with its depth key. Pixels without a surface
+/// (depth 0) land nowhere.
+pub fn project(
+    uv_motion: &[[f32; 2]],
+    depth: &[f32],
+    width: u32,
+    height: u32,
+    alpha: f32,
+) -> Vec<Candidate> {
+    let size = Vec2::new(width as f32, height as f32);
+    uv_motion
+        .iter()
+        .zip(depth)
+        .enumerate()
+        .map(|(i, (m, &d))| {
+            if d.is_nan() || d <= 0.0 {
+                return Candidate::MISS;
+            }
+            let at = pixel_center(i, width) + Vec2::from_array(*m) * size * (1.0 - alpha);
+            cell(at, width, height, 1.0)
+                .map(|slot| Candidate {
+                    slot,
+                    key: depth_key(d),
+                })
+                .unwrap_or(Candidate::MISS)
+        })
+        .collect()
+}
+
+/// Pass 4: every written pixel of `out` takes its winner's uv motion and
+/// depth and is flagged written ([`WARPED`]); the rest stay empty.
+pub fn merge(winners: &Winners, uv_motion: &[[f32; 2]], depth: &[f32], out: &mut Output) {
+    for t in 0..out.mask.len() {
+        if let Some(i) = winners.winner(t) {
+            out.motion[t] = uv_motion[i];
+            out.depth[t] = depth[i];
+            out.color[t] = [0.0, 0.0, 0.0, 1.0];
+            out.mask[t] = WARPED;
+        }
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    /// width, height, 0, 0
+    size: [u32; 4],
+    /// alpha, 0, 0, 0
+    alpha: [f32; 4],
+}
+
+/// The GPU passes 2–4 (the splat between 3 and 4 is `splat.rs`).
+#[derive(Debug)]
+pub struct GpuReproject {
+    normalize: Kernel,
+    project: Kernel,
+    merge: Kernel,
+}
+
+impl GpuReproject {
+    /// Compiles the kernels.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        let src = include_str!("reproject.wgsl");
+        Self {
+            normalize: Kernel::new(
+                ctx,
+                src,
+                "interp_normalize",
+                &[Uniform, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite],
+            ),
+            project: Kernel::new(
+                ctx,
+                src,
+                "interp_project",
+                &[
+                    Uniform, Skip, Read, Skip, Skip, Skip, Skip, Skip, ReadWrite, ReadWrite,
+                ],
+            ),
+            merge: Kernel::new(
+                ctx,
+                src,
+                "interp_merge",
+                &[
+                    Uniform, Skip, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                    ReadWrite,
+                ],
+            ),
+        }
+    }
+
+    fn params(ctx: &GpuContext, width: u32, height: u32, alpha: f32) -> wgpu::Buffer {
+        ctx.uniform(bytemuck::bytes_of(&Params {
+            size: [width, height, 0, 0],
+            alpha: [alpha, 0.0, 0.0, 0.0],
+        }))
+    }
+
+    /// Records normalize + project: `motion` (pixels) → `uv` → `candidates`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_project(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        (width, height): (u32, u32),
+        alpha: f32,
+        motion: &wgpu::Buffer,
+        depth: &wgpu::Buffer,
+        uv: &wgpu::Buffer,
+        candidates: &wgpu::Buffer,
+    ) {
+        let p = Self::params(ctx, width, height, alpha);
+        let n = u64::from(width) * u64::from(height);
+        self.normalize.dispatch(ctx, encoder, &[&p, motion, uv], n);
+        self.project
+            .dispatch(ctx, encoder, &[&p, depth, uv, candidates], n);
+    }
+
+    /// Records merge of the splat winners into `out`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_merge(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        (width, height): (u32, u32),
+        depth: &wgpu::Buffer,
+        winners: &wgpu::Buffer,
+        uv: &wgpu::Buffer,
+        out: crate::gffe::warp::GpuOutput<'_>,
+    ) {
+        let p = Self::params(ctx, width, height, 0.0);
+        let n = u64::from(width) * u64::from(height);
+        self.merge.dispatch(
+            ctx,
+            encoder,
+            &[
+                &p, depth, winners, out.color, out.depth, out.motion, out.mask, uv,
+            ],
+            n,
+        );
+    }
+}

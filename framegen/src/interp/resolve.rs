@@ -1,0 +1,115 @@
+//! GeoMotionGen pass 7, resolve (seed 003): a written pixel fetches the
+//! current frame back along its motion, `y − (1 − α)·m`; an unwritten one
+//! (disoccluded in the current frame) reverses the inpainted motion and
+//! fetches the previous frame at `y + α·m`. Fetches are bilinear and
+//! clamped to the image; depth is the fetched frame's nearest pixel; the
+//! output motion points to the previous frame (`α·m`, in pixels).
+
+use glam::Vec2;
+
+use crate::camera::pixel_center;
+use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::output::{Output, WARPED};
+use crate::sample::{bilinear, clamp_index};
+
+/// One rendered frame's color and depth.
+#[derive(Clone, Copy, Debug)]
+pub struct Image<'a> {
+    /// Linear RGB.
+    pub color: &'a [[f32; 4]],
+    /// Linear depth.
+    pub depth: &'a [f32],
+}
+
+/// CPU reference: turns `out` (uv motion + written mask after push-pull)
+/// into the interpolated frame.
+pub fn resolve(out: &mut Output, current: Image<'_>, previous: Image<'_>, alpha: f32) {
+    let (w, h) = (out.width, out.height);
+    let size = Vec2::new(w as f32, h as f32);
+    for t in 0..out.mask.len() {
+        let center = pixel_center(t, w);
+        let m = Vec2::from_array(out.motion[t]) * size;
+        let (image, at) = if out.mask[t] == WARPED {
+            (current, center - m * (1.0 - alpha))
+        } else {
+            (previous, center + m * alpha)
+        };
+        let c = bilinear(image.color, w, h, at);
+        out.color[t] = [c.x, c.y, c.z, 1.0];
+        out.depth[t] = image.depth[clamp_index(at, w, h)];
+        out.motion[t] = (m * alpha).to_array();
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    size: [u32; 4],
+    alpha: [f32; 4],
+}
+
+/// The GPU pass.
+#[derive(Debug)]
+pub struct GpuResolve {
+    kernel: Kernel,
+}
+
+/// Color and depth buffers of one frame on the GPU.
+#[derive(Debug, Clone, Copy)]
+pub struct GpuImage<'a> {
+    /// `vec4<f32>` color.
+    pub color: &'a wgpu::Buffer,
+    /// `f32` depth.
+    pub depth: &'a wgpu::Buffer,
+}
+
+impl GpuResolve {
+    /// Compiles the kernel.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        Self {
+            kernel: Kernel::new(
+                ctx,
+                include_str!("resolve.wgsl"),
+                "interp_resolve",
+                &[
+                    Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                ],
+            ),
+        }
+    }
+
+    /// Records the resolve over `out`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        (width, height): (u32, u32),
+        alpha: f32,
+        current: GpuImage<'_>,
+        previous: GpuImage<'_>,
+        out: crate::gffe::warp::GpuOutput<'_>,
+    ) {
+        let p = ctx.uniform(bytemuck::bytes_of(&Params {
+            size: [width, height, 0, 0],
+            alpha: [alpha, 0.0, 0.0, 0.0],
+        }));
+        self.kernel.dispatch(
+            ctx,
+            encoder,
+            &[
+                &p,
+                current.color,
+                current.depth,
+                previous.color,
+                previous.depth,
+                out.color,
+                out.depth,
+                out.motion,
+                out.mask,
+            ],
+            u64::from(width) * u64::from(height),
+        );
+    }
+}
