@@ -18,7 +18,9 @@
 //!   is held.
 //! * **Interpolate** (GeoMotionGen, adds latency): rendered frame t+1 is
 //!   held back until the frames between t and t+1 have been shown; a slot
-//!   never waits on the network (a missing t+1 holds t).
+//!   never waits on the network (a missing t+1 holds t). Exactly one frame
+//!   is held back: a backlog beyond that is dropped, so the added latency
+//!   stays one render interval.
 //! * **Repeat**: the newest ready frame, again and again (the baseline).
 //!
 //! Frames that become ready but are never shown are counted as drops by
@@ -230,21 +232,30 @@ impl Scheduler {
         Some((SlotKind::Extrapolated, source, None, alpha))
     }
 
+    /// Interpolation holds back exactly one frame: when more are pending
+    /// (the stream got ahead, e.g. at start-up), the older ones are dropped
+    /// (counted) so the added latency stays one render interval instead of
+    /// growing by a whole interval per backlogged frame.
+    fn trim_backlog(&mut self) {
+        while self.pending.len() > 2 {
+            self.pending.pop_front();
+            self.drops.scheduler += 1;
+        }
+    }
+
     fn interpolate(
         &mut self,
         now: Duration,
     ) -> Option<(SlotKind, FrameReady, Option<FrameReady>, f64)> {
         let ri = self.config.render_interval.as_secs_f64();
         let Some((current, at)) = self.shown else {
-            // Start once two frames are ready: show the older, keep the newer.
+            // Start once two frames are ready: show the older, keep the
+            // newer as the target of the slots in between.
             if self.pending.len() < 2 {
                 return None;
             }
+            self.trim_backlog();
             let first = self.pending.pop_front()?;
-            self.drops.scheduler += self.pending.len().saturating_sub(1) as u64;
-            while self.pending.len() > 1 {
-                self.pending.pop_front();
-            }
             self.shown = Some((first, now));
             return Some((SlotKind::Rendered, first, None, 0.0));
         };
@@ -252,8 +263,9 @@ impl Scheduler {
         // Half a vsync of slack so rounding never skips a rendered frame.
         let due = alpha + 0.5 * self.config.display_interval.as_secs_f64() / ri >= 1.0;
         match self.pending.front().copied() {
-            Some(next) if due => {
-                self.pending.pop_front();
+            Some(_) if due => {
+                self.trim_backlog();
+                let next = self.pending.pop_front()?;
                 self.shown = Some((next, now));
                 Some((SlotKind::Rendered, next, None, 0.0))
             }
