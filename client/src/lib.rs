@@ -12,6 +12,7 @@ pub mod demo;
 pub mod present;
 pub mod receiver;
 pub mod tls;
+pub mod window;
 
 pub use connect::{ConnectConfig, ConnectError, Session, SessionStats, connect};
 pub use receiver::{Delivery, FrameReceiver, ReceiveError, StreamId};

@@ -65,6 +65,13 @@ struct RunArgs {
     /// Write the full report (every displayed frame) as JSON.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Present in a window: `auto` when a display exists (DISPLAY or
+    /// WAYLAND_DISPLAY), `on`, or `off` (headless).
+    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
+    window: String,
+    /// Save the window's last frame (overlay included) as a PNG on exit.
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
 }
 
 impl Default for RunArgs {
@@ -231,8 +238,47 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
     })
 }
 
-/// `client run`: the demo loop.
+/// `client run`: the demo, in a window when there is a display.
 fn run(args: RunArgs) -> anyhow::Result<()> {
+    let display =
+        std::env::var_os("DISPLAY").is_some() || std::env::var_os("WAYLAND_DISPLAY").is_some();
+    let want = match args.window.as_str() {
+        "on" => true,
+        "off" => false,
+        _ => display,
+    };
+    let event_loop = if want {
+        match client::window::event_loop() {
+            Ok(el) => Some(el),
+            Err(e) if args.window == "on" => return Err(e),
+            Err(e) => {
+                println!("no window ({e}); presenting headless");
+                None
+            }
+        }
+    } else {
+        None
+    };
+    let Some(event_loop) = event_loop else {
+        return session(args, None);
+    };
+    let proxy = event_loop.create_proxy();
+    let screenshot = args.screenshot.clone();
+    let worker = std::thread::spawn(move || {
+        let result = session(args, Some(proxy.clone()));
+        let _ = proxy.send_event(client::window::Event::Done);
+        result
+    });
+    let shown = client::window::run(event_loop, screenshot);
+    let result = worker
+        .join()
+        .map_err(|_| anyhow::anyhow!("the presenter thread panicked"))?;
+    shown.and(result)
+}
+
+/// Connects (starting the in-process server if needed), presents, and
+/// prints the latency summary.
+fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
@@ -278,7 +324,8 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
             },
         };
         println!(
-            "no window presenter yet: presenting headless for {} s ({} -> {} fps, method {})",
+            "presenting {} for {} s ({} -> {} fps, method {})",
+            if window.is_some() { "in a window" } else { "headless" },
             args.seconds,
             session.welcome.fps,
             session.welcome.fps * f64::from(args.n + 1),
@@ -291,6 +338,7 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
             max_alpha: args.max_alpha,
             png_dir: args.png.clone(),
             cpu: gpu.is_none(),
+            window,
         };
         let report = run_headless(&mut session, &config, gpu).await?;
         session.close().await;

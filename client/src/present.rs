@@ -43,6 +43,8 @@ pub struct PresentConfig {
     pub png_dir: Option<PathBuf>,
     /// Run the passes on the CPU reference instead of wgpu.
     pub cpu: bool,
+    /// Send every presented frame (and the overlay text) to a window.
+    pub window: Option<crate::window::Sink>,
 }
 
 impl Default for PresentConfig {
@@ -54,6 +56,7 @@ impl Default for PresentConfig {
             max_alpha: 3.0,
             png_dir: None,
             cpu: false,
+            window: None,
         }
     }
 }
@@ -207,8 +210,22 @@ pub async fn run_headless(
                 }
             }
             let (image, ready_at) = produce(&slot, &mut generator, &kept, &mut generation, start)?;
-            if let (Some(dir), Some(image)) = (&config.png_dir, image) {
-                write_png(dir, slot.display_id, &image)?;
+            if let (Some(dir), Some(image)) = (&config.png_dir, &image) {
+                write_png(dir, slot.display_id, image)?;
+            }
+            if let (Some(sink), Some(image)) = (&config.window, &image) {
+                let stats = overlay(
+                    &accounting,
+                    received,
+                    clock(),
+                    &generation,
+                    &ingest,
+                    scheduler.drops(),
+                );
+                if !send_to_window(sink, image, stats) {
+                    // The window was closed: the session ends.
+                    break;
+                }
             }
             let done = clock();
             let present_at = accounting.first_vsync_after(done.max(vsync + di));
@@ -273,4 +290,63 @@ fn write_png(dir: &std::path::Path, id: u64, frame: &Frame) -> anyhow::Result<()
         image::ExtendedColorType::Rgb8,
     )?;
     Ok(())
+}
+
+/// The overlay text (in the spirit of Moonlight's statistics overlay).
+fn overlay(
+    accounting: &Accounting,
+    received: u64,
+    now: Duration,
+    generation: &[f64],
+    ingest: &[f64],
+    drops: framegen::schedule::Drops,
+) -> String {
+    let secs = now.as_secs_f64().max(1e-3);
+    let records = accounting.records();
+    let recent = &records[records.len().saturating_sub(120)..];
+    let generated = records
+        .iter()
+        .filter(|r| matches!(r.kind, SlotKind::Extrapolated | SlotKind::Interpolated))
+        .count();
+    let last = |v: &[f64]| Percentiles::of(v[v.len().saturating_sub(120)..].to_vec());
+    let latency = Percentiles::of(recent.iter().map(|r| r.latency_ms).collect());
+    let host = Percentiles::of(recent.iter().map(|r| r.host_processing_ms).collect());
+    format!(
+        "incoming {:5.1} fps   generated {:5.1} fps   presented {:5.1} fps\n\
+         host {:5.2} ms   ingest {:5.2} ms   generation {:5.2} ms\n\
+         latency p50 {:5.2} ms   p99 {:5.2} ms\n\
+         drops: network {}  late {}  scheduler {}",
+        received as f64 / secs,
+        generated as f64 / secs,
+        records.len() as f64 / secs,
+        host.p50,
+        last(ingest).p50,
+        last(generation).p50,
+        latency.p50,
+        latency.p99,
+        drops.network,
+        drops.late,
+        drops.scheduler,
+    )
+}
+
+/// Display-encodes a frame and hands it to the window; false once the
+/// window is gone.
+fn send_to_window(sink: &crate::window::Sink, frame: &Frame, stats: String) -> bool {
+    let size = frame.meta.size;
+    let Some(image) = framegen::display_encode(size.width, size.height, &frame.color) else {
+        return true;
+    };
+    let rgba = image
+        .to_rgb8()
+        .chunks_exact(3)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect();
+    sink.send_event(crate::window::Event::Frame {
+        width: size.width,
+        height: size.height,
+        rgba,
+        stats,
+    })
+    .is_ok()
 }
