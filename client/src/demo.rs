@@ -34,6 +34,35 @@ pub struct LocalServer {
 /// Starts a server on 127.0.0.1 (a free port) rendering `scene` live at
 /// `size` and `fps`.
 pub fn start_local(scene: &str, size: FrameSize, fps: f64) -> anyhow::Result<LocalServer> {
+    start_local_from(
+        SourceSpec::Scene {
+            spec: scene.into(),
+            size,
+            fps,
+            window: WindowSettings::default(),
+            base: std::path::PathBuf::from("."),
+        },
+        size,
+        fps,
+    )
+}
+
+/// Starts a server on 127.0.0.1 replaying the dump in `dir` (looped, as one
+/// live stream) at its own size and rate.
+pub fn start_local_dump(dir: &std::path::Path) -> anyhow::Result<LocalServer> {
+    let manifest = protocol::dump::DumpReader::open(dir)?.manifest().clone();
+    let size = FrameSize::new(manifest.width, manifest.height);
+    start_local_from(
+        SourceSpec::Dump {
+            dir: dir.to_path_buf(),
+            looped: true,
+        },
+        size,
+        manifest.fps,
+    )
+}
+
+fn start_local_from(spec: SourceSpec, size: FrameSize, fps: f64) -> anyhow::Result<LocalServer> {
     let identity_dir = tempfile::tempdir()?;
     let identity = Identity::load_or_create(identity_dir.path())?;
     let token = format!("demo-{}", std::process::id());
@@ -48,17 +77,7 @@ pub fn start_local(scene: &str, size: FrameSize, fps: f64) -> anyhow::Result<Loc
         window_mode: WindowMode::Off,
     };
     let frames = Source::channel();
-    let source = Source::start(
-        SourceSpec::Scene {
-            spec: scene.into(),
-            size,
-            fps,
-            window: WindowSettings::default(),
-            base: std::path::PathBuf::from("."),
-        },
-        buffers,
-        frames.clone(),
-    )?;
+    let source = Source::start(spec, buffers, frames.clone())?;
     let server = Server::start(
         "127.0.0.1:0".parse()?,
         identity.quic_server_config()?,

@@ -72,6 +72,16 @@ struct RunArgs {
     /// Save the window's last frame (overlay included) as a PNG on exit.
     #[arg(long)]
     screenshot: Option<PathBuf>,
+    /// Display refresh rate in Hz (default: (n + 1) × the render rate).
+    #[arg(long)]
+    refresh: Option<f64>,
+    /// Stream this dump (looped) from the in-process server instead of
+    /// rendering the scene.
+    #[arg(long, conflicts_with = "server")]
+    from_dump: Option<PathBuf>,
+    /// Write every presented frame into a dump here.
+    #[arg(long)]
+    dump_to: Option<PathBuf>,
 }
 
 impl Default for RunArgs {
@@ -285,13 +295,19 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
     runtime.block_on(async move {
         let local = match args.server {
             Some(_) => None,
-            None => {
-                println!(
-                    "starting an in-process server: {} at {}x{}, {} fps",
-                    args.scene, args.size.width, args.size.height, args.fps
-                );
-                Some(client::demo::start_local(&args.scene, args.size, args.fps)?)
-            }
+            None => match &args.from_dump {
+                Some(dir) => {
+                    println!("starting an in-process server replaying {}", dir.display());
+                    Some(client::demo::start_local_dump(dir)?)
+                }
+                None => {
+                    println!(
+                        "starting an in-process server: {} at {}x{}, {} fps",
+                        args.scene, args.size.width, args.size.height, args.fps
+                    );
+                    Some(client::demo::start_local(&args.scene, args.size, args.fps)?)
+                }
+            },
         };
         let mut session = match (&local, args.server) {
             (Some(l), _) => l.connect().await?,
@@ -328,7 +344,8 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             if window.is_some() { "in a window" } else { "headless" },
             args.seconds,
             session.welcome.fps,
-            session.welcome.fps * f64::from(args.n + 1),
+            args.refresh
+                .unwrap_or(session.welcome.fps * f64::from(args.n + 1)),
             args.method
         );
         let config = PresentConfig {
@@ -339,6 +356,8 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             png_dir: args.png.clone(),
             cpu: gpu.is_none(),
             window,
+            refresh_hz: args.refresh,
+            dump_dir: args.dump_to.clone(),
         };
         let report = run_headless(&mut session, &config, gpu).await?;
         session.close().await;

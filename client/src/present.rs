@@ -45,6 +45,10 @@ pub struct PresentConfig {
     pub cpu: bool,
     /// Send every presented frame (and the overlay text) to a window.
     pub window: Option<crate::window::Sink>,
+    /// Display refresh rate (Hz); `None`: (n + 1) × the render rate.
+    pub refresh_hz: Option<f64>,
+    /// Write every presented frame into a dump here.
+    pub dump_dir: Option<PathBuf>,
 }
 
 impl Default for PresentConfig {
@@ -57,6 +61,8 @@ impl Default for PresentConfig {
             png_dir: None,
             cpu: false,
             window: None,
+            refresh_hz: None,
+            dump_dir: None,
         }
     }
 }
@@ -112,9 +118,13 @@ pub async fn run_headless(
 ) -> anyhow::Result<Report> {
     let fps = session.welcome.fps;
     let policy = policy_of(config.method);
+    let base = match config.refresh_hz {
+        Some(hz) if hz.is_finite() && hz > 0.0 => ScheduleConfig::refresh(policy, fps, hz),
+        _ => ScheduleConfig::multiple(policy, fps, config.n),
+    };
     let schedule = ScheduleConfig {
         max_alpha: config.max_alpha,
-        ..ScheduleConfig::multiple(policy, fps, config.n)
+        ..base
     };
     let settings = Settings {
         n: config.n,
@@ -128,6 +138,18 @@ pub async fn run_headless(
     if let Some(dir) = &config.png_dir {
         std::fs::create_dir_all(dir)?;
     }
+    let display_fps = 1.0 / schedule.display_interval.as_secs_f64();
+    let mut dump = match &config.dump_dir {
+        Some(dir) => Some(protocol::dump::DumpWriter::create(
+            dir,
+            protocol::dump::Manifest::new(
+                display_fps,
+                session.welcome.size,
+                format!("client presented frames ({})", config.method),
+            ),
+        )?),
+        None => None,
+    };
     let mut scheduler = Scheduler::new(schedule);
     let mut accounting = Accounting::new(schedule, Duration::ZERO);
     let di = schedule.display_interval;
@@ -213,13 +235,20 @@ pub async fn run_headless(
             if let (Some(dir), Some(image)) = (&config.png_dir, &image) {
                 write_png(dir, slot.display_id, image)?;
             }
+            if let (Some(writer), Some(image)) = (dump.as_mut(), &image) {
+                // A dump's frames are numbered by display id.
+                let mut shown = image.clone();
+                shown.meta.index = slot.display_id;
+                shown.meta.cut = false;
+                writer.write_frame(&shown)?;
+            }
             if let (Some(sink), Some(image)) = (&config.window, &image) {
+                let rtt = session.stats().client.rtt_us as f64 / 1000.0;
                 let stats = overlay(
                     &accounting,
                     received,
                     clock(),
-                    &generation,
-                    &ingest,
+                    (&generation, &ingest, rtt),
                     scheduler.drops(),
                 );
                 if !send_to_window(sink, image, stats) {
@@ -235,6 +264,9 @@ pub async fn run_headless(
         let next = ((clock().as_secs_f64() / di.as_secs_f64()).floor() as u64).max(k + 1);
         missed += next.min(last + 1) - k - 1;
         k = next;
+    }
+    if let Some(writer) = dump {
+        writer.finish()?;
     }
     let summary = accounting.summary(scheduler.drops());
     Ok(Report {
@@ -297,8 +329,7 @@ fn overlay(
     accounting: &Accounting,
     received: u64,
     now: Duration,
-    generation: &[f64],
-    ingest: &[f64],
+    (generation, ingest, rtt_ms): (&[f64], &[f64], f64),
     drops: framegen::schedule::Drops,
 ) -> String {
     let secs = now.as_secs_f64().max(1e-3);
@@ -313,13 +344,14 @@ fn overlay(
     let host = Percentiles::of(recent.iter().map(|r| r.host_processing_ms).collect());
     format!(
         "incoming {:5.1} fps   generated {:5.1} fps   presented {:5.1} fps\n\
-         host {:5.2} ms   ingest {:5.2} ms   generation {:5.2} ms\n\
+         host {:5.2} ms   network rtt {:5.2} ms   ingest {:5.2} ms   generation {:5.2} ms\n\
          latency p50 {:5.2} ms   p99 {:5.2} ms\n\
          drops: network {}  late {}  scheduler {}",
         received as f64 / secs,
         generated as f64 / secs,
         records.len() as f64 / secs,
         host.p50,
+        rtt_ms,
         last(ingest).p50,
         last(generation).p50,
         latency.p50,

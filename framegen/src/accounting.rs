@@ -95,6 +95,8 @@ pub struct Summary {
     pub interpolated: usize,
     /// Repeated (held) slots.
     pub repeated: usize,
+    /// Extrapolated slots beyond α = 1 (a late rendered frame covered).
+    pub beyond_one: usize,
     /// ExtraNet latency of every displayed frame.
     pub latency_ms: Percentiles,
     /// Latency frame generation adds to rendered frames.
@@ -191,6 +193,11 @@ impl Accounting {
             extrapolated: count(SlotKind::Extrapolated),
             interpolated: count(SlotKind::Interpolated),
             repeated: count(SlotKind::Repeated),
+            beyond_one: self
+                .records
+                .iter()
+                .filter(|r| r.kind == SlotKind::Extrapolated && r.alpha > 1.0)
+                .count(),
             latency_ms: collect(&|r| Some(r.latency_ms)),
             added_latency_ms: collect(&|r| r.added_latency_ms),
             ms_between_presents: collect(&|r| r.ms_between_presents),
@@ -210,8 +217,8 @@ impl Summary {
             )
         };
         let mut s = format!(
-            "displayed: {} rendered, {} extrapolated, {} interpolated, {} repeated\n",
-            self.rendered, self.extrapolated, self.interpolated, self.repeated
+            "displayed: {} rendered, {} extrapolated ({} beyond α = 1), {} interpolated, {} repeated (held)\n",
+            self.rendered, self.extrapolated, self.beyond_one, self.interpolated, self.repeated
         );
         s += &p("latency ms", &self.latency_ms);
         s += &p("added latency ms", &self.added_latency_ms);

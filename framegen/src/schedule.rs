@@ -83,6 +83,14 @@ impl ScheduleConfig {
             max_alpha: 3.0,
         }
     }
+
+    /// A display at a given refresh rate (Hz), whatever the render rate.
+    pub fn refresh(policy: Policy, render_fps: f64, refresh_hz: f64) -> Self {
+        Self {
+            display_interval: Duration::from_secs_f64(1.0 / refresh_hz),
+            ..Self::multiple(policy, render_fps, 1)
+        }
+    }
 }
 
 /// A rendered frame that has become ready.
