@@ -563,17 +563,3 @@ fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
         output: out,
     }
 }
-
-/// The GFFE passes run by both backends, in order, for a [`Job`]; kept
-/// here so the CPU and GPU backends cannot drift apart in what they run.
-pub fn passes_of(method: Method, levels: u32) -> Vec<Pass> {
-    match method {
-        Method::Repeat => vec![Pass::Crop],
-        Method::Reproject => vec![Pass::Motion, Pass::Warp, Pass::Holes],
-        Method::Gffe if levels > 0 => {
-            vec![Pass::Motion, Pass::Warp, Pass::BgFill, Pass::Holes]
-        }
-        Method::Gffe => vec![Pass::Motion, Pass::Warp, Pass::Holes],
-        Method::Interp => vec![Pass::Reproject, Pass::Holes, Pass::Resolve],
-    }
-}
