@@ -137,12 +137,15 @@ async fn interpolation_adds_at_least_one_render_interval() {
         "{s:?}"
     );
     let interval = 1000.0 / 30.0;
-    // The median rendered frame is held back at least one render interval.
-    // (When frames arrive bunched under load, the scheduler drops the
-    // backlog and the frame it shows next may have waited less; the
-    // median is robust to that, and extrapolation's median is 0.)
+    // Holding back adds a render interval in steady state (the scheduler
+    // unit tests check it exactly on a fake clock). On a loaded machine
+    // frames arrive in bursts and the scheduler drops the backlog, so the
+    // next frame shown may have waited less: measured p50 33.3 ms on a calm
+    // machine and 16.7 ms on a loaded CI run, p95 ≥ 33.3 ms in both. The
+    // bounds: median at least one vsync, p95 at least one render interval
+    // (extrapolation's median is 0).
     assert!(
-        s.added_latency_ms.p50 >= interval - 0.5,
+        s.added_latency_ms.p50 >= 1000.0 / 60.0 - 0.5 && s.added_latency_ms.p95 >= interval - 0.5,
         "{:?}",
         s.added_latency_ms
     );
