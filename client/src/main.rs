@@ -114,6 +114,59 @@ enum Command {
     Run(RunArgs),
     /// Connect to a server and receive frames.
     Connect(ConnectArgs),
+    /// Measure every method and setting against ground truth and time:
+    /// writes report.md, report.json, plots and ꟻLIP heat maps.
+    Eval(EvalArgs),
+}
+
+/// Options of `eval`.
+#[derive(Args)]
+struct EvalArgs {
+    /// Scenes (builtin:NAME or a RON file), each rendered at --fps.
+    #[arg(long, value_delimiter = ',', default_value = "builtin:default")]
+    scenes: Vec<String>,
+    /// Add every built-in scene (the default scene and the hard cases).
+    #[arg(long)]
+    all_scenes: bool,
+    /// Evaluate dumps rendered at the display rate instead of scenes.
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["scenes", "all_scenes"])]
+    dump: Vec<PathBuf>,
+    /// Output directory.
+    #[arg(long, default_value = "eval-report")]
+    out: PathBuf,
+    /// Displayed size of rendered scenes.
+    #[arg(long, default_value = "320x180", value_parser = parse_size)]
+    size: FrameSize,
+    /// Display rate of rendered scenes (the render rate is fps / (n + 1)).
+    #[arg(long, default_value_t = 60.0)]
+    fps: f64,
+    /// First frame.
+    #[arg(long, default_value_t = 30)]
+    start: u64,
+    /// Frames per sequence at the display rate.
+    #[arg(long, default_value_t = 36)]
+    frames: u64,
+    /// `methods` (the four at their defaults) or `full` (every axis).
+    #[arg(long, value_enum, default_value = "full")]
+    sweep: client::eval::variant::Sweep,
+    /// Backends to time; quality is scored on the first.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu,wgpu")]
+    backends: Vec<client::eval::BackendKind>,
+    /// Only the variants whose label contains one of these (e.g. `gffe,repeat n=2`).
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// Extra resolutions (the methods at their defaults) for the first scene, e.g. 640x360,960x540.
+    #[arg(long, value_delimiter = ',', value_parser = parse_size)]
+    resolutions: Vec<FrameSize>,
+    /// Fed frames before scoring starts.
+    #[arg(long, default_value_t = 2)]
+    warmup: usize,
+    /// Heat maps for the first this many scenes...
+    #[arg(long, default_value_t = 1)]
+    heatmap_scenes: usize,
+    /// ...at this many frames each.
+    #[arg(long, default_value_t = 2)]
+    heatmap_frames: usize,
 }
 
 /// Options of `connect`.
@@ -155,7 +208,58 @@ fn main() -> anyhow::Result<()> {
         None => run(RunArgs::default()),
         Some(Command::Run(args)) => run(args),
         Some(Command::Connect(args)) => connect(args),
+        Some(Command::Eval(args)) => eval(args),
     }
+}
+
+/// `client eval`: the accuracy-against-time report.
+fn eval(args: EvalArgs) -> anyhow::Result<()> {
+    use client::eval::sequence::Input;
+    let inputs: Vec<Input> = if !args.dump.is_empty() {
+        args.dump.iter().cloned().map(Input::Dump).collect()
+    } else {
+        let mut scenes = args.scenes.clone();
+        if args.all_scenes {
+            for name in server::scene::builtin::names() {
+                let spec = format!("builtin:{name}");
+                if !scenes.contains(&spec) {
+                    scenes.push(spec);
+                }
+            }
+        }
+        scenes.into_iter().map(Input::Scene).collect()
+    };
+    let config = client::eval::EvalConfig {
+        inputs,
+        size: args.size,
+        fps: args.fps,
+        start: args.start,
+        frames: args.frames,
+        sweep: args.sweep,
+        backends: args.backends,
+        resolutions: args.resolutions,
+        only: args.only,
+        warmup: args.warmup,
+        heatmap_inputs: args.heatmap_scenes,
+        heatmap_frames: args.heatmap_frames,
+        out: args.out.clone(),
+        command: std::env::args()
+            .enumerate()
+            .map(|(i, a)| if i == 0 { "client".into() } else { a })
+            .collect::<Vec<_>>()
+            .join(" "),
+        progress: true,
+    };
+    let started = Instant::now();
+    let report = client::eval::run(&config)?;
+    println!(
+        "evaluated {} scenes, {} variants in {:.1} s: {}",
+        report.scenes.len(),
+        report.scenes.iter().map(|s| s.rows.len()).sum::<usize>(),
+        started.elapsed().as_secs_f64(),
+        args.out.join("report.md").display()
+    );
+    Ok(())
 }
 
 /// `client connect`: receive frames, optionally into a dump.

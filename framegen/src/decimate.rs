@@ -32,36 +32,74 @@ pub fn compose(newer: &[[f32; 2]], older: &[[f32; 2]], width: u32, height: u32) 
         .collect()
 }
 
-/// Every `step`-th frame of `frames` (starting with the first), each with
-/// its motion composed back to the previous kept frame. Frames whose sizes
-/// differ from their predecessor keep their own vectors (no chain exists).
+/// `frame` as a renderer at the lower rate would have sent it after the
+/// `skipped` frames (oldest first, the previous kept frame excluded): its
+/// motion composed back through them, and a cut among them carried over
+/// (the chain crosses it; the lower-rate renderer would have flagged it).
+/// The chain stops at a frame of another size (no correspondence exists).
+pub fn kept(frame: &Frame, skipped: &[&Frame]) -> Frame {
+    let mut f = frame.clone();
+    f.meta.cut |= skipped.iter().any(|g| g.meta.cut);
+    for older in skipped.iter().rev() {
+        if older.meta.size != f.meta.size {
+            break;
+        }
+        f.motion = compose(
+            &f.motion,
+            &older.motion,
+            f.meta.size.width,
+            f.meta.size.height,
+        );
+    }
+    f
+}
+
+/// Every `step`-th frame of `frames` (starting with the first), each
+/// [`kept`] after the frames skipped before it.
 pub fn decimate(frames: &[Frame], step: usize) -> Vec<Frame> {
     let step = step.max(1);
-    let mut out = Vec::with_capacity(frames.len().div_ceil(step));
-    for (k, frame) in frames.iter().enumerate().step_by(step) {
-        let mut f = frame.clone();
-        if k >= step {
-            for j in (k + 1 - step..k).rev() {
-                let older = &frames[j];
-                if older.meta.size != f.meta.size {
-                    break;
-                }
-                f.motion = compose(
-                    &f.motion,
-                    &older.motion,
-                    f.meta.size.width,
-                    f.meta.size.height,
-                );
-            }
-        }
-        out.push(f);
-    }
-    out
+    frames
+        .iter()
+        .enumerate()
+        .step_by(step)
+        .map(|(k, frame)| {
+            let skipped: Vec<&Frame> = frames[k.saturating_sub(step - 1)..k].iter().collect();
+            kept(frame, &skipped)
+        })
+        .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_cut_in_a_skipped_frame_flags_the_next_kept_one() {
+        use protocol::{Camera, FrameMeta, FrameSize, Pose, Projection};
+        let size = FrameSize::new(2, 1);
+        let mut frames: Vec<Frame> = (0..5)
+            .map(|i| Frame {
+                meta: FrameMeta {
+                    index: i,
+                    time: i as f64 / 60.0,
+                    camera: Camera::new(
+                        Pose::new(glam::DVec3::ZERO, glam::DQuat::IDENTITY),
+                        Projection::perspective(1.0, 2.0, 0.1, f64::INFINITY),
+                    ),
+                    size,
+                    host_processing: std::time::Duration::ZERO,
+                    cut: false,
+                },
+                color: vec![[half::f16::ZERO; 4]; 2],
+                depth: vec![1.0; 2],
+                motion: vec![[0.0; 2]; 2],
+                extras: vec![],
+            })
+            .collect();
+        frames[3].meta.cut = true;
+        let kept = decimate(&frames, 2);
+        assert_eq!(kept.iter().map(|f| f.meta.cut).collect::<Vec<_>>(), [false, false, true]);
+    }
 
     #[test]
     fn composition_adds_the_vectors_along_the_path() {

@@ -36,7 +36,7 @@ pub use generator::{
     PushOutcome, Snapshot,
 };
 pub use gpu::{GpuBackend, GpuContext};
-pub use metrics::{MetricsError, psnr, ssim};
+pub use metrics::{MetricsError, psnr, psnr_of_mse, squared_error_map, ssim, ssim_map};
 pub use settings::{Method, Settings};
 
 /// Everything that can go wrong in frame generation.

@@ -31,14 +31,8 @@ fn check(a: &DisplayImage, b: &DisplayImage) -> Result<(), MetricsError> {
 
 /// Mean squared error over all pixels and channels.
 pub fn mse(a: &DisplayImage, b: &DisplayImage) -> Result<f64, MetricsError> {
-    check(a, b)?;
-    let sum: f64 = a
-        .rgb
-        .iter()
-        .zip(&b.rgb)
-        .flat_map(|(p, q)| (0..3).map(move |c| f64::from(p[c] - q[c]).powi(2)))
-        .sum();
-    Ok(sum / (a.rgb.len() * 3) as f64)
+    let map = squared_error_map(a, b)?;
+    Ok(map.iter().sum::<f64>() / map.len() as f64)
 }
 
 /// Peak signal-to-noise ratio in dB with peak 1: `10 log10(1 / MSE)`.
@@ -102,11 +96,19 @@ fn blur(src: &[f64], width: usize, height: usize, w: &[f64; 11]) -> Vec<f64> {
 /// per RGB channel with clamp-to-edge borders and averaged over pixels and
 /// channels. 1 means identical.
 pub fn ssim(a: &DisplayImage, b: &DisplayImage) -> Result<f64, MetricsError> {
+    let map = ssim_map(a, b)?;
+    Ok(map.iter().sum::<f64>() / map.len() as f64)
+}
+
+/// The SSIM of every pixel (its window's value, averaged over the three
+/// channels): [`ssim`] is its mean; the `eval` report pools it over regions
+/// (disoccluded, dynamic, static).
+pub fn ssim_map(a: &DisplayImage, b: &DisplayImage) -> Result<Vec<f64>, MetricsError> {
     check(a, b)?;
     let (w, h) = (a.width as usize, a.height as usize);
     let win = gaussian_window();
     let (c1, c2) = (0.01f64.powi(2), 0.03f64.powi(2));
-    let mut total = 0.0;
+    let mut map = vec![0.0; a.rgb.len()];
     for c in 0..3 {
         let x: Vec<f64> = a.rgb.iter().map(|p| f64::from(p[c])).collect();
         let y: Vec<f64> = b.rgb.iter().map(|p| f64::from(p[c])).collect();
@@ -114,17 +116,39 @@ pub fn ssim(a: &DisplayImage, b: &DisplayImage) -> Result<f64, MetricsError> {
         let yy: Vec<f64> = y.iter().map(|v| v * v).collect();
         let xy: Vec<f64> = x.iter().zip(&y).map(|(p, q)| p * q).collect();
         let [mx, my, sxx, syy, sxy] = [&x, &y, &xx, &yy, &xy].map(|v| blur(v, w, h, &win));
-        for i in 0..x.len() {
+        for (i, m) in map.iter_mut().enumerate() {
             let (vx, vy, cov) = (
                 sxx[i] - mx[i] * mx[i],
                 syy[i] - my[i] * my[i],
                 sxy[i] - mx[i] * my[i],
             );
-            total += ((2.0 * mx[i] * my[i] + c1) * (2.0 * cov + c2))
-                / ((mx[i] * mx[i] + my[i] * my[i] + c1) * (vx + vy + c2));
+            *m += ((2.0 * mx[i] * my[i] + c1) * (2.0 * cov + c2))
+                / ((mx[i] * mx[i] + my[i] * my[i] + c1) * (vx + vy + c2))
+                / 3.0;
         }
     }
-    Ok(total / (a.rgb.len() * 3) as f64)
+    Ok(map)
+}
+
+/// The squared error of every pixel, averaged over its three channels:
+/// [`mse`] is its mean; pooled over a region it gives that region's PSNR.
+pub fn squared_error_map(a: &DisplayImage, b: &DisplayImage) -> Result<Vec<f64>, MetricsError> {
+    check(a, b)?;
+    Ok(a.rgb
+        .iter()
+        .zip(&b.rgb)
+        .map(|(p, q)| (0..3).map(|c| f64::from(p[c] - q[c]).powi(2)).sum::<f64>() / 3.0)
+        .collect())
+}
+
+/// PSNR in dB (peak 1) of a mean squared error, capped at `cap` so that
+/// identical images average to a finite number.
+pub fn psnr_of_mse(mse: f64, cap: f64) -> f64 {
+    if mse <= 0.0 {
+        cap
+    } else {
+        (-10.0 * mse.log10()).min(cap)
+    }
 }
 
 #[cfg(test)]
@@ -189,6 +213,20 @@ mod tests {
             rgb: vec![],
         };
         assert_eq!(psnr(&e, &e), Err(MetricsError::Empty));
+    }
+
+    #[test]
+    fn maps_pool_to_the_global_metrics() {
+        let a = image(17, 9, |x, y| ((x * 5 + y * 3) % 7) as f32 / 6.0);
+        let b = image(17, 9, |x, y| ((x * 3 + y * 5) % 7) as f32 / 6.0);
+        let se = squared_error_map(&a, &b).unwrap();
+        let mean = se.iter().sum::<f64>() / se.len() as f64;
+        assert!((mean - mse(&a, &b).unwrap()).abs() < 1e-12);
+        assert!((psnr_of_mse(mean, 100.0) - psnr(&a, &b).unwrap()).abs() < 1e-9);
+        assert_eq!(psnr_of_mse(0.0, 100.0), 100.0);
+        let map = ssim_map(&a, &b).unwrap();
+        let pooled = map.iter().sum::<f64>() / map.len() as f64;
+        assert!((pooled - ssim(&a, &b).unwrap()).abs() < 1e-12);
     }
 
     proptest! {

@@ -35,11 +35,39 @@ pub fn camera(index: u64, fps: f64, origin: DVec3, size: FrameSize) -> Camera {
     )
 }
 
-/// Renders frame `index` of the scene: color, exact linear depth (`+inf` for
-/// sky) and exact motion to the previous frame's camera (zero on frame 0).
+/// Camera of frame `index` spinning in place: 2 m above `origin`, looking
+/// 25° down, turning about the vertical at 1 rad/s. At low frame rates the
+/// turn between frames exceeds the field of view, so motion vectors grow
+/// larger than the frame.
+pub fn spin_camera(index: u64, fps: f64, origin: DVec3, size: FrameSize) -> Camera {
+    let yaw = index as f64 / fps;
+    let eye = origin + DVec3::new(0.0, 2.0, 0.0);
+    let dir = DVec3::new(yaw.sin(), -25f64.to_radians().tan(), -yaw.cos());
+    Camera::new(
+        Pose::look_at(eye, eye + dir, DVec3::Y),
+        Projection::perspective(
+            60f64.to_radians(),
+            f64::from(size.width) / f64::from(size.height),
+            0.05,
+            f64::INFINITY,
+        ),
+    )
+}
+
+/// A camera path of the analytic scene: frame index, fps, origin, size.
+pub type CameraPath = fn(u64, f64, DVec3, FrameSize) -> Camera;
+
+/// Renders frame `index` of the scene with the orbiting [`camera`]: color,
+/// exact linear depth (`+inf` for sky) and exact motion to the previous
+/// frame's camera (zero on frame 0).
 pub fn render(index: u64, fps: f64, origin: DVec3, size: FrameSize) -> Frame {
-    let cam = camera(index, fps, origin, size);
-    let prev = camera(index.saturating_sub(1), fps, origin, size);
+    render_by(camera, index, fps, origin, size)
+}
+
+/// [`render`] along any camera path.
+pub fn render_by(path: CameraPath, index: u64, fps: f64, origin: DVec3, size: FrameSize) -> Frame {
+    let cam = path(index, fps, origin, size);
+    let prev = path(index.saturating_sub(1), fps, origin, size);
     let dims = size.as_f64();
     let n = size.pixels() as usize;
     let (mut color, mut depth, mut motion) = (

@@ -1,7 +1,7 @@
 //! GeoMotionGen interpolation (issue 7): convergence at the ends, identical
 //! frames, the dissipation limit of the push-pull pyramid, and CPU / wgpu
 //! parity of its passes. (Quality against ground truth is in
-//! `framegen_quality.rs`; NaN / inf inputs in `framegen_stability.rs`.)
+//! `framegen_quality.rs`; NaN / inf inputs in `hard_cases.rs`.)
 
 use framegen::interp::reproject;
 use framegen::{FrameGenerator, GpuContext, Method, PixelSource, Settings};

@@ -1,0 +1,381 @@
+//! `client eval`: what accuracy costs in time (issue 8, DESIGN §9).
+//!
+//! A sequence rendered at the display rate (a dump, or a scene rendered on
+//! the fly) is fed to every variant at 1/(n+1) of its rate, motion composed
+//! back to the previous fed frame ([`framegen::decimate::kept`]); each
+//! generated frame is compared with the rendered frame it stands for:
+//! the skipped frame after the last fed one for the extrapolators, the
+//! skipped frame before it for interpolation. Every variant runs on each
+//! chosen backend in lockstep over one pass of the sequence; quality is
+//! scored on the first backend's output (the backends agree; the report
+//! gives their PSNR against each other) and time is measured on each.
+//!
+//! * [`variant`]: the settings swept;
+//! * [`sequence`]: the frames;
+//! * [`measure`]: PSNR, SSIM, ꟻLIP, regions;
+//! * [`timing`]: per-pass and total milliseconds, the copy floor;
+//! * [`report`]: Pareto fronts, `report.md`, `report.json`;
+//! * [`plot`] and [`heatmap`]: the images.
+
+pub mod heatmap;
+pub mod measure;
+pub mod plot;
+pub mod report;
+pub mod sequence;
+pub mod timing;
+pub mod variant;
+
+use std::collections::{HashMap, VecDeque};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::Context;
+use framegen::{FrameGenerator, GpuBackend, GpuContext, Method};
+use indicatif::{ProgressBar, ProgressStyle};
+use protocol::wire::WindowMode;
+use protocol::{Frame, FrameSize};
+use serde::Serialize;
+
+use measure::{Accumulator, score};
+use report::{Report, Row, SceneReport};
+use sequence::{Input, Sequence, Step};
+use timing::TimingAcc;
+use variant::{Axis, Sweep, Variant};
+
+/// Where a variant runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum BackendKind {
+    /// The plain Rust reference, single-threaded.
+    Cpu,
+    /// wgpu compute.
+    Wgpu,
+}
+
+impl BackendKind {
+    /// Name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Cpu => "cpu",
+            BackendKind::Wgpu => "wgpu",
+        }
+    }
+}
+
+/// What to evaluate and where to write it.
+#[derive(Clone, Debug)]
+pub struct EvalConfig {
+    /// Scenes or dumps, one report section each.
+    pub inputs: Vec<Input>,
+    /// Displayed size of rendered scenes.
+    pub size: FrameSize,
+    /// Display rate of rendered scenes.
+    pub fps: f64,
+    /// First frame.
+    pub start: u64,
+    /// Frames at the display rate per sequence.
+    pub frames: u64,
+    /// Which variants.
+    pub sweep: Sweep,
+    /// Backends to time (quality is scored on the first).
+    pub backends: Vec<BackendKind>,
+    /// Extra resolutions for the first (rendered) input.
+    pub resolutions: Vec<FrameSize>,
+    /// Keep only variants whose label contains one of these (all if empty).
+    pub only: Vec<String>,
+    /// Fed frames before scoring starts (history and background warm up).
+    pub warmup: usize,
+    /// Heat maps for the first this many inputs...
+    pub heatmap_inputs: usize,
+    /// ...at this many frames each.
+    pub heatmap_frames: usize,
+    /// Output directory.
+    pub out: PathBuf,
+    /// The command line, quoted in the report.
+    pub command: String,
+    /// Show progress bars.
+    pub progress: bool,
+}
+
+/// Runs the evaluation and writes `report.md`, `report.json`, the plots
+/// and the heat maps into `config.out`.
+pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
+    anyhow::ensure!(!config.inputs.is_empty(), "nothing to evaluate");
+    anyhow::ensure!(!config.backends.is_empty(), "no backend chosen");
+    std::fs::create_dir_all(&config.out)
+        .with_context(|| format!("creating {}", config.out.display()))?;
+    let ctx = if config.backends.contains(&BackendKind::Wgpu) {
+        Some(GpuContext::new().context("wgpu backend")?)
+    } else {
+        None
+    };
+    let mut scenes = Vec::new();
+    let mut heatmaps = Vec::new();
+    let mut sizes = vec![config.size];
+    for (index, input) in config.inputs.iter().enumerate() {
+        let rendered = matches!(input, Input::Scene(_));
+        let size = match input {
+            Input::Scene(_) => config.size,
+            Input::Dump(dir) => protocol::dump::DumpReader::open(dir)?.manifest().size(),
+        };
+        let mut variants = variant::sweep(config.sweep, size, rendered);
+        if index == 0 && rendered {
+            variants.extend(variant::resolutions(&config.resolutions));
+        }
+        if !config.only.is_empty() {
+            variants.retain(|v| config.only.iter().any(|o| v.label.contains(o.as_str())));
+        }
+        anyhow::ensure!(!variants.is_empty(), "no variant matches --only {:?}", config.only);
+        // One pass of the sequence per (size, window): the frames differ.
+        let mut groups: Vec<((FrameSize, WindowMode), Vec<Variant>)> = Vec::new();
+        for v in variants.iter().cloned() {
+            let key = (v.size, v.window);
+            match groups.iter_mut().find(|(k, _)| *k == key) {
+                Some((_, vs)) => vs.push(v),
+                None => groups.push((key, vec![v])),
+            }
+        }
+        let name = input.name();
+        let mut rows = Vec::new();
+        let group_count = groups.len();
+        for (g, ((gsize, window), vs)) in groups.into_iter().enumerate() {
+            if !sizes.contains(&gsize) {
+                sizes.push(gsize);
+            }
+            let mut seq = Sequence::open(input, gsize, config.fps, window, config.start, config.frames)?;
+            let bar = progress_bar(config, seq.len(), &format!(
+                "{name} [{}/{}] {}x{} window {}",
+                g + 1,
+                group_count,
+                gsize.width,
+                gsize.height,
+                variant::window_name(window)
+            ));
+            let heat = (index < config.heatmap_inputs
+                && window == WindowMode::Off
+                && gsize == size)
+                .then(|| heatmap_frames(seq.len() as usize, config.warmup, config.heatmap_frames));
+            let out = run_group(&mut seq, &vs, ctx.as_ref(), config, heat.as_deref(), &bar)?;
+            bar.finish_and_clear();
+            rows.extend(out.rows);
+            for (truth_index, captures) in out.heat {
+                let file = heatmap::write(&config.out, &name, config.start + truth_index as u64, &captures)?;
+                heatmaps.push(file);
+            }
+        }
+        // Report order: the sweep's.
+        rows.sort_by_key(|r: &Row| variants.iter().position(|v| v.label == r.label));
+        tracing::info!("{name}: {} variants", rows.len());
+        scenes.push(SceneReport { scene: name, rows });
+    }
+    let copy_floor = sizes
+        .iter()
+        .map(|&s| timing::copy_floor(s, ctx.as_deref()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut report = Report::new(config, ctx.as_deref(), scenes, copy_floor, heatmaps);
+    report.mark_pareto();
+    report.write(&config.out)?;
+    plot::write_all(&report, &config.out)?;
+    Ok(report)
+}
+
+fn progress_bar(config: &EvalConfig, len: u64, message: &str) -> ProgressBar {
+    if !config.progress {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:48} {bar:30} {pos}/{len} frames  {elapsed}<{eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message(message.to_string());
+    bar
+}
+
+/// The truth frames (sequence positions) to draw heat maps for: odd
+/// positions that both the extrapolators (fed the frame before) and
+/// interpolation (fed the frame after) are scored on at n = 1, spread over
+/// the scored range.
+fn heatmap_frames(len: usize, warmup: usize, count: usize) -> Vec<usize> {
+    let first = 2 * warmup + 1;
+    let candidates: Vec<usize> = (first..len.saturating_sub(1)).step_by(2).collect();
+    if candidates.is_empty() || count == 0 {
+        return Vec::new();
+    }
+    let count = count.min(candidates.len());
+    (0..count)
+        .map(|i| candidates[(2 * i + 1) * candidates.len() / (2 * count)])
+        .collect()
+}
+
+/// A variant with its generators and accumulators.
+struct Run<'a> {
+    variant: &'a Variant,
+    generators: Vec<(BackendKind, FrameGenerator)>,
+    quality: Accumulator,
+    timing: Vec<TimingAcc>,
+    agreement: Option<f64>,
+}
+
+/// What one pass over a sequence produced.
+struct GroupOutput {
+    rows: Vec<Row>,
+    /// Per heat-map truth frame: (label, generated image, truth image, ꟻLIP map).
+    heat: Vec<(usize, Vec<heatmap::Capture>)>,
+}
+
+fn run_group(
+    seq: &mut Sequence,
+    variants: &[Variant],
+    ctx: Option<&Arc<GpuContext>>,
+    config: &EvalConfig,
+    heat_frames: Option<&[usize]>,
+    bar: &ProgressBar,
+) -> anyhow::Result<GroupOutput> {
+    let mut runs = variants
+        .iter()
+        .map(|v| {
+            let generators = config
+                .backends
+                .iter()
+                .map(|&b| {
+                    let g = match (b, ctx) {
+                        (BackendKind::Wgpu, Some(ctx)) => FrameGenerator::with_backend(
+                            v.settings,
+                            Box::new(GpuBackend::profiled(ctx.clone())),
+                        ),
+                        _ => FrameGenerator::cpu(v.settings),
+                    }?;
+                    Ok((b, g))
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            Ok(Run {
+                variant: v,
+                timing: config.backends.iter().map(|&b| TimingAcc::new(b)).collect(),
+                generators,
+                quality: Accumulator::default(),
+                agreement: None,
+            })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let max_step = variants.iter().map(Variant::step).max().unwrap_or(1);
+    let mut ring: VecDeque<Step> = VecDeque::with_capacity(2 * max_step);
+    let mut heat: HashMap<usize, Vec<heatmap::Capture>> = HashMap::new();
+    let mut r = 0usize;
+    while let Some(step) = seq.next_step()? {
+        ring.push_back(step);
+        if ring.len() > 2 * max_step {
+            ring.pop_front();
+        }
+        // ring holds sequence positions r + 1 − len ..= r.
+        let at = |k: usize| &ring[ring.len() - 1 - (r - k)];
+        let mut kept: HashMap<usize, Arc<Frame>> = HashMap::new();
+        for run in &mut runs {
+            let s = run.variant.step();
+            if (r + 1) % s != 0 {
+                continue;
+            }
+            let m = r + 1 - s;
+            let fed = kept
+                .entry(s)
+                .or_insert_with(|| {
+                    let skipped: Vec<&Frame> = if m >= s {
+                        (m + 1 - s..m).map(|k| at(k).fed.as_ref()).collect()
+                    } else {
+                        Vec::new()
+                    };
+                    Arc::new(framegen::decimate::kept(&at(m).fed, &skipped))
+                })
+                .clone();
+            let scored = m / s >= config.warmup.max(1);
+            let interp = run.variant.settings.method == Method::Interp;
+            let mut outputs = Vec::new();
+            for ((_, g), t) in run.generators.iter_mut().zip(&mut run.timing) {
+                let start = Instant::now();
+                g.push(&fed)?;
+                let push = start.elapsed();
+                if !scored {
+                    continue;
+                }
+                let mut generated = Vec::new();
+                let mut gen_time = Vec::new();
+                for j in 1..s {
+                    let start = Instant::now();
+                    generated.push(g.generate(j as f64 / s as f64)?);
+                    gen_time.push(start.elapsed());
+                }
+                t.add(push, &gen_time, &g.timings());
+                outputs.push(generated);
+            }
+            if !scored {
+                continue;
+            }
+            for j in 1..s {
+                let truth_pos = if interp { m - s + j } else { m + j };
+                let truth = &at(truth_pos).truth;
+                let size = truth.meta.size;
+                let g = &outputs[0][j - 1];
+                let gs = g.frame.meta.size;
+                anyhow::ensure!(
+                    gs == size,
+                    "{}: generated {}x{} but the truth is {}x{}",
+                    run.variant.label,
+                    gs.width,
+                    gs.height,
+                    size.width,
+                    size.height
+                );
+                let encode = |f: &Frame| {
+                    framegen::display_encode(size.width, size.height, &f.color)
+                        .context("display encode")
+                };
+                let (test, truth_image) = (encode(&g.frame)?, encode(truth)?);
+                let regions = measure::regions(g, truth);
+                let sc = score(&test, &truth_image, &regions)?;
+                run.quality.add(&sc, g);
+                for other in outputs.iter().skip(1) {
+                    let p = framegen::psnr(&test, &encode(&other[j - 1].frame)?)?
+                        .min(measure::PSNR_CAP);
+                    run.agreement = Some(run.agreement.map_or(p, |a: f64| a.min(p)));
+                }
+                if run.variant.axis == Axis::Method
+                    && s == 2
+                    && heat_frames.is_some_and(|h| h.contains(&truth_pos))
+                {
+                    heat.entry(truth_pos).or_default().push(heatmap::Capture {
+                        label: run.variant.label.clone(),
+                        test,
+                        truth: truth_image,
+                        flip: sc.flip_map,
+                        flip_mean: sc.flip,
+                    });
+                }
+            }
+        }
+        bar.inc(1);
+        r += 1;
+    }
+    let rows = runs
+        .into_iter()
+        .map(|run| Row::new(run.variant, run.quality.finish(), run.timing, run.agreement))
+        .collect();
+    let mut heat: Vec<_> = heat.into_iter().collect();
+    heat.sort_by_key(|(k, _)| *k);
+    Ok(GroupOutput { rows, heat })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn heatmap_frames_are_scored_by_both_kinds_of_method() {
+        let f = heatmap_frames(24, 2, 2);
+        assert_eq!(f.len(), 2);
+        for t in f {
+            assert!(t % 2 == 1 && t >= 5 && t + 1 < 24, "{t}");
+        }
+        assert!(heatmap_frames(4, 2, 3).is_empty());
+    }
+}

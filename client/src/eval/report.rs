@@ -1,0 +1,461 @@
+//! The numbers of an `eval` run, their Pareto fronts, and the files:
+//! `report.json` (every number) and `report.md` (tables per scene).
+//!
+//! A variant is on a Pareto front when no other variant of the same scene,
+//! resolution and n is at least as fast (ms per generated frame on that
+//! backend) and at least as accurate (mean ꟻLIP), one of them strictly.
+//! Two fronts are marked: among the methods that add no latency (★), and
+//! among all, interpolation included (☆ where only that front holds it):
+//! interpolation buys its accuracy with a render interval of latency.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use framegen::GpuContext;
+use serde::Serialize;
+
+use super::measure::Quality;
+use super::timing::{CopyFloor, Timing, TimingAcc};
+use super::variant::{Axis, Variant, window_name};
+use super::{BackendKind, EvalConfig};
+
+/// Everything an `eval` run measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// How it was produced.
+    pub command: String,
+    /// Seconds since the Unix epoch when it was written.
+    pub created_unix: u64,
+    /// The machine.
+    pub machine: Machine,
+    /// The run's parameters.
+    pub frames: u64,
+    /// First frame.
+    pub start: u64,
+    /// Display rate of rendered scenes.
+    pub fps: f64,
+    /// Fed frames before scoring.
+    pub warmup: usize,
+    /// Backends, first = the one quality is scored on.
+    pub backends: Vec<BackendKind>,
+    /// The bandwidth floor per size.
+    pub copy_floor: Vec<CopyFloor>,
+    /// Per scene (or dump).
+    pub scenes: Vec<SceneReport>,
+    /// Heat-map images, relative to the report directory.
+    pub heatmaps: Vec<String>,
+}
+
+/// Where it ran.
+#[derive(Clone, Debug, Serialize)]
+pub struct Machine {
+    /// Logical CPUs.
+    pub cpu_threads: usize,
+    /// The wgpu adapter, if one was used.
+    pub adapter: Option<String>,
+}
+
+/// One scene's rows.
+#[derive(Clone, Debug, Serialize)]
+pub struct SceneReport {
+    /// Scene or dump name.
+    pub scene: String,
+    /// One per variant, in sweep order.
+    pub rows: Vec<Row>,
+}
+
+/// One variant's numbers.
+#[derive(Clone, Debug, Serialize)]
+pub struct Row {
+    /// The variant's label.
+    pub label: String,
+    /// What it varies.
+    pub axis: Axis,
+    /// Method name.
+    pub method: String,
+    /// Generated frames per rendered frame.
+    pub n: u32,
+    /// History length (gffe).
+    pub history: u32,
+    /// Background levels (gffe).
+    pub background_levels: u32,
+    /// Push-pull levels.
+    pub pushpull_levels: u32,
+    /// Static threshold ε (px).
+    pub static_epsilon: f32,
+    /// Adaptive window mode.
+    pub window: &'static str,
+    /// `WxH`.
+    pub size: String,
+    /// Render intervals of added latency.
+    pub added_latency_frames: u32,
+    /// Quality against ground truth.
+    pub quality: Quality,
+    /// Per backend.
+    pub timing: Vec<Timing>,
+    /// Lowest PSNR between the first backend's output and another's.
+    pub backend_agreement_psnr: Option<f64>,
+    /// Backends on whose zero-latency front it lies.
+    pub front_zero_latency: Vec<BackendKind>,
+    /// Backends on whose all-methods front it lies.
+    pub front_all: Vec<BackendKind>,
+}
+
+impl Row {
+    /// Assembles a row.
+    pub fn new(v: &Variant, quality: Quality, timing: Vec<TimingAcc>, agreement: Option<f64>) -> Self {
+        let s = &v.settings;
+        Self {
+            label: v.label.clone(),
+            axis: v.axis,
+            method: s.method.name().into(),
+            n: s.n,
+            history: s.effective_history(),
+            background_levels: s.effective_levels(),
+            pushpull_levels: s.pushpull_levels,
+            static_epsilon: s.static_epsilon,
+            window: window_name(v.window),
+            size: format!("{}x{}", v.size.width, v.size.height),
+            added_latency_frames: v.added_latency_frames(),
+            quality,
+            timing: timing.iter().map(TimingAcc::finish).collect(),
+            backend_agreement_psnr: agreement,
+            front_zero_latency: Vec::new(),
+            front_all: Vec::new(),
+        }
+    }
+
+    /// Its time on `backend`, ms per generated frame.
+    pub fn ms(&self, backend: BackendKind) -> Option<f64> {
+        self.timing
+            .iter()
+            .find(|t| t.backend == backend)
+            .map(|t| t.per_generated_ms)
+    }
+
+    fn front_mark(&self, backend: BackendKind) -> &'static str {
+        if self.front_zero_latency.contains(&backend) {
+            "★"
+        } else if self.front_all.contains(&backend) {
+            "☆"
+        } else {
+            ""
+        }
+    }
+}
+
+/// Indices of the Pareto-optimal points (minimise both coordinates).
+pub fn pareto(points: &[(f64, f64)]) -> Vec<usize> {
+    (0..points.len())
+        .filter(|&i| {
+            let (a, b) = points[i];
+            !points.iter().enumerate().any(|(j, &(c, d))| {
+                j != i && c <= a && d <= b && (c < a || d < b)
+            })
+        })
+        .collect()
+}
+
+impl Report {
+    /// Collects the parts.
+    pub fn new(
+        config: &EvalConfig,
+        ctx: Option<&GpuContext>,
+        scenes: Vec<SceneReport>,
+        copy_floor: Vec<CopyFloor>,
+        heatmaps: Vec<String>,
+    ) -> Self {
+        Self {
+            command: config.command.clone(),
+            created_unix: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs()),
+            machine: Machine {
+                cpu_threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+                adapter: ctx.map(|c| {
+                    format!(
+                        "{} ({:?}, {:?})",
+                        c.adapter_info.name, c.adapter_info.device_type, c.adapter_info.backend
+                    )
+                }),
+            },
+            frames: config.frames,
+            start: config.start,
+            fps: config.fps,
+            warmup: config.warmup,
+            backends: config.backends.clone(),
+            copy_floor,
+            scenes,
+            heatmaps,
+        }
+    }
+
+    /// Marks both fronts per scene, size, n and backend.
+    pub fn mark_pareto(&mut self) {
+        let backends = self.backends.clone();
+        for scene in &mut self.scenes {
+            let mut keys: Vec<(String, u32)> =
+                scene.rows.iter().map(|r| (r.size.clone(), r.n)).collect();
+            keys.dedup();
+            keys.sort();
+            keys.dedup();
+            for (size, n) in keys {
+                for &b in &backends {
+                    for zero_latency in [true, false] {
+                        let members: Vec<usize> = (0..scene.rows.len())
+                            .filter(|&i| {
+                                let r = &scene.rows[i];
+                                r.size == size
+                                    && r.n == n
+                                    && (!zero_latency || r.added_latency_frames == 0)
+                                    && r.ms(b).is_some()
+                            })
+                            .collect();
+                        let points: Vec<(f64, f64)> = members
+                            .iter()
+                            .map(|&i| {
+                                let r = &scene.rows[i];
+                                (r.ms(b).unwrap_or(f64::INFINITY), r.quality.flip)
+                            })
+                            .collect();
+                        for k in pareto(&points) {
+                            let row = &mut scene.rows[members[k]];
+                            if zero_latency {
+                                row.front_zero_latency.push(b);
+                            } else {
+                                row.front_all.push(b);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Writes `report.json` and `report.md` into `dir`.
+    pub fn write(&self, dir: &Path) -> anyhow::Result<()> {
+        std::fs::write(dir.join("report.json"), serde_json::to_vec_pretty(self)?)?;
+        std::fs::write(dir.join("report.md"), self.markdown())?;
+        Ok(())
+    }
+
+    /// The Markdown report.
+    pub fn markdown(&self) -> String {
+        let mut md = String::new();
+        let _ = writeln!(md, "# Frame generation: accuracy against time\n");
+        let _ = writeln!(md, "Produced by `{}`.\n", self.command);
+        let _ = writeln!(
+            md,
+            "{} frames per sequence from frame {} at {} fps (the display rate); every (n+1)-th frame is fed, \
+             each generated frame is compared with the skipped rendered frame it stands for (the extrapolators: \
+             the one after the last fed frame; `interp`: the one before). The first {} fed frames only warm up. \
+             Metrics on display-encoded images (Reinhard + sRGB): PSNR (dB, capped at 100), SSIM, and ꟻLIP \
+             (mean error, lower is better; `nv-flip`, 67 pixels per degree). Regions: *disoccluded* = no warped \
+             source (background layers or push-pull), *dynamic* = on an animated object in the ground truth, \
+             *static* = the rest.\n",
+            self.frames, self.start, self.fps, self.warmup
+        );
+        let _ = writeln!(
+            md,
+            "Machine: {} CPU threads; wgpu adapter: {}.\n",
+            self.machine.cpu_threads,
+            self.machine.adapter.as_deref().unwrap_or("none")
+        );
+        let _ = writeln!(md, "Times are ms per generated frame: (push + n generations) / n, the median over the sequence.\n");
+        for b in &self.backends {
+            let _ = writeln!(md, "* `{}`: {}.", b.name(), super::timing::method_of(*b));
+        }
+        let _ = writeln!(
+            md,
+            "\n★ = on the Pareto front (ms on that backend against mean ꟻLIP, same scene, resolution and n) among \
+             the methods that add no latency; ☆ = on the front only when interpolation (one render interval of \
+             added latency) is admitted.\n"
+        );
+        let _ = writeln!(md, "## Bandwidth floor\n");
+        let _ = writeln!(md, "A copy of the bytes a frame's inputs take (28 B/px), which any pass reads at least once.\n");
+        let _ = writeln!(md, "| size | bytes | CPU memcpy ms | wgpu buffer copy ms |");
+        let _ = writeln!(md, "|---|---|---|---|");
+        for c in &self.copy_floor {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {:.3} | {} |",
+                c.size,
+                c.bytes,
+                c.cpu_ms,
+                c.wgpu_ms.map_or("—".into(), |v| format!("{v:.3}"))
+            );
+        }
+        self.summary(&mut md);
+        for scene in &self.scenes {
+            self.scene_section(&mut md, scene);
+        }
+        if !self.heatmaps.is_empty() {
+            let _ = writeln!(md, "\n## ꟻLIP heat maps\n");
+            let _ = writeln!(
+                md,
+                "Top row: the ground truth, then each method's output (repeat, reproject, gffe, interp) at α = 0.5. \
+                 Bottom row: each method's ꟻLIP error map (magma: black = no visible error, yellow = large).\n"
+            );
+            for h in &self.heatmaps {
+                let _ = writeln!(md, "![{h}]({h})\n");
+            }
+        }
+        md
+    }
+
+    /// Methods at their defaults across scenes, and how often each variant
+    /// is on a front.
+    fn summary(&self, md: &mut String) {
+        let _ = writeln!(md, "\n## Summary: methods at their defaults\n");
+        let methods: Vec<String> = framegen::Method::ALL.iter().map(|m| m.name().to_string()).collect();
+        let _ = write!(md, "| scene |");
+        for m in &methods {
+            let _ = write!(md, " {m} PSNR / ꟻLIP |");
+        }
+        let _ = writeln!(md);
+        let _ = writeln!(md, "|---|{}", "---|".repeat(methods.len()));
+        for scene in &self.scenes {
+            let _ = write!(md, "| {} |", scene.scene);
+            for m in &methods {
+                match scene.rows.iter().find(|r| r.axis == Axis::Method && &r.method == m) {
+                    Some(r) => {
+                        let _ = write!(md, " {:.2} / {:.4} |", r.quality.psnr, r.quality.flip);
+                    }
+                    None => {
+                        let _ = write!(md, " — |");
+                    }
+                }
+            }
+            let _ = writeln!(md);
+        }
+        let _ = writeln!(md, "\n### How often each variant is on the zero-latency front\n");
+        let _ = write!(md, "| variant |");
+        for b in &self.backends {
+            let _ = write!(md, " {} (of {} scenes) |", b.name(), self.scenes.len());
+        }
+        let _ = write!(md, " mean ꟻLIP |");
+        for b in &self.backends {
+            let _ = write!(md, " mean {} ms |", b.name());
+        }
+        let _ = writeln!(md);
+        let _ = writeln!(md, "|---|{}", "---|".repeat(2 * self.backends.len() + 1));
+        let Some(first) = self.scenes.first() else {
+            return;
+        };
+        for row in &first.rows {
+            let same: Vec<&Row> = self
+                .scenes
+                .iter()
+                .filter_map(|s| s.rows.iter().find(|r| r.label == row.label))
+                .collect();
+            let _ = write!(md, "| {} |", row.label);
+            for b in &self.backends {
+                let on = same.iter().filter(|r| r.front_zero_latency.contains(b)).count();
+                let _ = write!(md, " {on} / {} |", same.len());
+            }
+            let mean = |f: &dyn Fn(&Row) -> Option<f64>| {
+                let v: Vec<f64> = same.iter().filter_map(|r| f(r)).collect();
+                v.iter().sum::<f64>() / v.len().max(1) as f64
+            };
+            let _ = write!(md, " {:.4} |", mean(&|r| Some(r.quality.flip)));
+            for &b in &self.backends {
+                let _ = write!(md, " {:.2} |", mean(&|r| r.ms(b)));
+            }
+            let _ = writeln!(md);
+        }
+    }
+
+    fn scene_section(&self, md: &mut String, scene: &SceneReport) {
+        let _ = writeln!(md, "\n## {}\n", scene.scene);
+        let _ = writeln!(md, "![ꟻLIP against ms](plots/{}.png)\n", plot_name(&scene.scene));
+        let _ = write!(
+            md,
+            "| variant | size | PSNR | SSIM | ꟻLIP | disoccluded % / ꟻLIP | dynamic % / ꟻLIP | static ꟻLIP | bg / filled % |"
+        );
+        for b in &self.backends {
+            let _ = write!(md, " {} ms |", b.name());
+        }
+        let _ = writeln!(md, " front | backends agree (dB) |");
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|{}---|---|", "---|".repeat(self.backends.len()));
+        let mut axis = None;
+        for r in &scene.rows {
+            if axis != Some(r.axis) {
+                axis = Some(r.axis);
+                let _ = writeln!(
+                    md,
+                    "| *{}* |{}",
+                    r.axis.title(),
+                    " |".repeat(10 + self.backends.len())
+                );
+            }
+            let q = &r.quality;
+            let region = |i: usize| {
+                let g = &q.regions[i];
+                match g.flip {
+                    Some(f) => format!("{:.1} / {:.4}", 100.0 * g.share, f),
+                    None => "0 / —".into(),
+                }
+            };
+            let _ = write!(
+                md,
+                "| {} | {} | {:.2} | {:.4} | {:.4} | {} | {} | {} | {:.2} / {:.2} |",
+                r.label,
+                r.size,
+                q.psnr,
+                q.ssim,
+                q.flip,
+                region(0),
+                region(1),
+                q.regions[2].flip.map_or("—".into(), |f| format!("{f:.4}")),
+                100.0 * q.sources.background,
+                100.0 * q.sources.filled,
+            );
+            for &b in &self.backends {
+                let _ = write!(md, " {} |", r.ms(b).map_or("—".into(), |v| format!("{v:.2}")));
+            }
+            let marks: Vec<String> = self
+                .backends
+                .iter()
+                .filter(|&&b| !r.front_mark(b).is_empty())
+                .map(|&b| format!("{}{}", r.front_mark(b), b.name()))
+                .collect();
+            let _ = writeln!(
+                md,
+                " {} | {} |",
+                marks.join(" "),
+                r.backend_agreement_psnr.map_or("—".into(), |p| format!("{p:.1}"))
+            );
+        }
+        // Per-pass breakdown of the methods at their defaults.
+        let _ = writeln!(md, "\nPer pass, ms per rendered frame (push + its n generations), methods at their defaults:\n");
+        for &b in &self.backends {
+            for r in scene.rows.iter().filter(|r| r.axis == Axis::Method) {
+                if let Some(t) = r.timing.iter().find(|t| t.backend == b) {
+                    let passes: Vec<String> = t.passes.iter().map(|p| format!("{} {:.2}", p.pass, p.ms)).collect();
+                    let _ = writeln!(md, "* {} `{}`: {}", b.name(), r.label, passes.join(", "));
+                }
+            }
+        }
+    }
+}
+
+/// File stem of a scene's plot.
+pub fn plot_name(scene: &str) -> String {
+    scene
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_keeps_only_undominated_points() {
+        let pts = [(1.0, 0.5), (2.0, 0.3), (3.0, 0.3), (2.5, 0.6), (0.5, 0.9)];
+        assert_eq!(pareto(&pts), vec![0, 1, 4]);
+        // Ties: equal points dominate neither each other.
+        assert_eq!(pareto(&[(1.0, 1.0), (1.0, 1.0)]), vec![0, 1]);
+    }
+}

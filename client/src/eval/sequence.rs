@@ -1,0 +1,165 @@
+//! Where `eval` gets its frames: a dump rendered at the display rate, or a
+//! built-in (or RON) scene rendered on the fly by the server's renderer,
+//! the same frames `server record` would write. Frames are streamed, never
+//! all held: a 300-frame 720p dump does not fit in memory comfortably.
+//!
+//! Each step yields the frame to *feed* (rendered with the variant group's
+//! adaptive window) and the ground *truth* to compare with (the plain
+//! frame of the displayed view; the same frame when no window is used).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::Context;
+use protocol::dump::DumpReader;
+use protocol::wire::WindowMode;
+use protocol::{Frame, FrameSize};
+use server::render::{Renderer, WindowSettings};
+use server::scene::Scene;
+
+/// What to evaluate on.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Input {
+    /// A scene (`builtin:NAME` or a RON file), rendered at `fps`.
+    Scene(String),
+    /// A dump rendered at the display rate.
+    Dump(PathBuf),
+}
+
+impl Input {
+    /// Name in the report.
+    pub fn name(&self) -> String {
+        match self {
+            Input::Scene(s) => s.strip_prefix("builtin:").unwrap_or(s).to_string(),
+            Input::Dump(d) => d
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| d.display().to_string()),
+        }
+    }
+}
+
+/// One step of a sequence: the frame to feed and the ground truth.
+#[derive(Clone)]
+pub struct Step {
+    /// Rendered with the window (what a server would stream).
+    pub fed: Arc<Frame>,
+    /// The plain frame of the displayed view.
+    pub truth: Arc<Frame>,
+}
+
+/// A stream of [`Step`]s.
+pub struct Sequence {
+    source: Source,
+    next: u64,
+    end: u64,
+    fps: f64,
+}
+
+enum Source {
+    Rendered {
+        plain: Box<Renderer>,
+        windowed: Option<Box<Renderer>>,
+    },
+    Dump(DumpReader),
+}
+
+impl Sequence {
+    /// Frames `start..start + count` of `input` at `size` and `fps` (a
+    /// dump keeps its own size and rate), rendered with `window`.
+    pub fn open(
+        input: &Input,
+        size: FrameSize,
+        fps: f64,
+        window: WindowMode,
+        start: u64,
+        count: u64,
+    ) -> anyhow::Result<Self> {
+        match input {
+            Input::Scene(spec) => {
+                let renderer = || -> anyhow::Result<Box<Renderer>> {
+                    let scene = Scene::load(spec).with_context(|| format!("scene {spec}"))?;
+                    Ok(Box::new(Renderer::new(scene, size, std::path::Path::new("."))?))
+                };
+                let windowed = if window == WindowMode::Off {
+                    None
+                } else {
+                    let mut r = renderer()?;
+                    r.set_window(WindowSettings {
+                        mode: window,
+                        ..WindowSettings::default()
+                    });
+                    Some(r)
+                };
+                Ok(Self {
+                    source: Source::Rendered {
+                        plain: renderer()?,
+                        windowed,
+                    },
+                    next: start,
+                    end: start + count,
+                    fps,
+                })
+            }
+            Input::Dump(dir) => {
+                let reader =
+                    DumpReader::open(dir).with_context(|| format!("dump {}", dir.display()))?;
+                let len = reader.len();
+                anyhow::ensure!(start < len, "the dump has {len} frames; --start {start} is past it");
+                let fps = reader.manifest().fps;
+                Ok(Self {
+                    source: Source::Dump(reader),
+                    next: start,
+                    end: (start + count).min(len),
+                    fps,
+                })
+            }
+        }
+    }
+
+    /// Steps this sequence yields.
+    pub fn len(&self) -> u64 {
+        self.end.saturating_sub(self.next)
+    }
+
+    /// Whether it yields nothing.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The display rate (frames per second of the sequence).
+    pub fn fps(&self) -> f64 {
+        self.fps
+    }
+
+    /// The next step, `None` at the end.
+    pub fn next_step(&mut self) -> anyhow::Result<Option<Step>> {
+        if self.next >= self.end {
+            return Ok(None);
+        }
+        let i = self.next;
+        self.next += 1;
+        let step = match &mut self.source {
+            Source::Rendered { plain, windowed } => {
+                let truth = Arc::new(plain.render(i, self.fps)?);
+                let fed = match windowed {
+                    Some(r) => Arc::new(r.render(i, self.fps)?),
+                    None => truth.clone(),
+                };
+                Step { fed, truth }
+            }
+            Source::Dump(reader) => {
+                let f = Arc::new(
+                    reader
+                        .read_frame(i)
+                        .with_context(|| format!("dump frame {i}"))?,
+                );
+                Step {
+                    fed: f.clone(),
+                    truth: f,
+                }
+            }
+        };
+        Ok(Some(step))
+    }
+}

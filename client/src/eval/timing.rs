@@ -1,0 +1,206 @@
+//! What each variant costs: wall time of push (ingest) and of each
+//! generated frame, per pass, and the bandwidth floor to compare with.
+//!
+//! The wgpu backend runs profiled: one submission per pass, waited for, so
+//! each pass's time is its submit + wait wall time. That is what lavapipe
+//! can report honestly (its timestamp queries read near zero for real work,
+//! see DEVELOPERS.md), at the price of one synchronisation per pass, which
+//! the totals include. The CPU reference is single-threaded wall time.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use framegen::{GpuContext, PassTime};
+use protocol::FrameSize;
+use serde::Serialize;
+
+use super::BackendKind;
+
+/// How the numbers of a backend were taken.
+pub fn method_of(backend: BackendKind) -> &'static str {
+    match backend {
+        BackendKind::Cpu => "wall time, single-threaded CPU reference",
+        BackendKind::Wgpu => "wall time of submit + wait per pass (profiled; no timestamp queries)",
+    }
+}
+
+/// Accumulates the times of one variant on one backend.
+pub struct TimingAcc {
+    backend: BackendKind,
+    push: Vec<f64>,
+    generate: Vec<f64>,
+    per_generated: Vec<f64>,
+    passes: BTreeMap<&'static str, f64>,
+    intervals: usize,
+}
+
+impl TimingAcc {
+    /// Empty, for `backend`.
+    pub fn new(backend: BackendKind) -> Self {
+        Self {
+            backend,
+            push: Vec::new(),
+            generate: Vec::new(),
+            per_generated: Vec::new(),
+            passes: BTreeMap::new(),
+            intervals: 0,
+        }
+    }
+
+    /// One rendered frame: its push, its generated frames, and the passes
+    /// the backend reported for all of them.
+    pub fn add(&mut self, push: Duration, generated: &[Duration], passes: &[PassTime]) {
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        self.push.push(ms(push));
+        self.generate.extend(generated.iter().map(|&d| ms(d)));
+        let total = ms(push) + generated.iter().map(|&d| ms(d)).sum::<f64>();
+        self.per_generated.push(total / generated.len().max(1) as f64);
+        for p in passes {
+            *self.passes.entry(p.pass.name()).or_default() += ms(p.time);
+        }
+        self.intervals += 1;
+    }
+
+    /// The summary.
+    pub fn finish(&self) -> Timing {
+        let n = self.intervals.max(1) as f64;
+        Timing {
+            backend: self.backend,
+            how: method_of(self.backend),
+            push_ms: median(&self.push),
+            generate_ms: median(&self.generate),
+            per_generated_ms: median(&self.per_generated),
+            per_generated_p95_ms: percentile(&self.per_generated, 0.95),
+            passes: self
+                .passes
+                .iter()
+                .map(|(&name, &sum)| PassMs { pass: name, ms: sum / n })
+                .collect(),
+        }
+    }
+}
+
+/// The times of one variant on one backend.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Timing {
+    /// The backend.
+    pub backend: BackendKind,
+    /// How it was measured.
+    pub how: &'static str,
+    /// Median push (ingest of a rendered frame), ms.
+    pub push_ms: f64,
+    /// Median generation of one frame, ms.
+    pub generate_ms: f64,
+    /// Median of (push + all n generations) / n per rendered frame: the
+    /// cost of one generated frame with its share of the ingest. The
+    /// x axis of the plots and the Pareto fronts.
+    pub per_generated_ms: f64,
+    /// Its 95th percentile.
+    pub per_generated_p95_ms: f64,
+    /// Mean ms per rendered frame, per pass (ingest + its n generations).
+    pub passes: Vec<PassMs>,
+}
+
+/// One pass's mean time.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PassMs {
+    /// Pass name.
+    pub pass: &'static str,
+    /// Mean ms per rendered frame.
+    pub ms: f64,
+}
+
+/// Median; 0 for no samples.
+pub fn median(v: &[f64]) -> f64 {
+    percentile(v, 0.5)
+}
+
+/// Nearest-rank percentile; 0 for no samples.
+pub fn percentile(v: &[f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let rank = ((q * s.len() as f64).ceil() as usize).clamp(1, s.len());
+    s[rank - 1]
+}
+
+/// The bandwidth reference at one size: copying the bytes a rendered
+/// frame's inputs take (color as f32×4, depth, motion: 28 B/px), which
+/// every pass at least has to read once.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CopyFloor {
+    /// `WxH`.
+    pub size: String,
+    /// Bytes copied.
+    pub bytes: u64,
+    /// Median ms of a host memory copy.
+    pub cpu_ms: f64,
+    /// Median ms of a device buffer copy (submit + wait).
+    pub wgpu_ms: Option<f64>,
+}
+
+/// Bytes per pixel of the inputs (f32×4 color, f32 depth, f32×2 motion).
+pub const BYTES_PER_PIXEL: u64 = 28;
+
+/// Measures the [`CopyFloor`] at `size` (median of 15 copies each).
+pub fn copy_floor(size: FrameSize, ctx: Option<&GpuContext>) -> anyhow::Result<CopyFloor> {
+    let bytes = size.pixels() * BYTES_PER_PIXEL;
+    let src = vec![1u8; bytes as usize];
+    let mut dst = vec![0u8; bytes as usize];
+    let mut cpu = Vec::new();
+    for _ in 0..15 {
+        let start = Instant::now();
+        dst.copy_from_slice(std::hint::black_box(&src));
+        std::hint::black_box(&mut dst);
+        cpu.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let wgpu_ms = match ctx {
+        Some(ctx) => {
+            let (a, b) = (ctx.storage("copy src", bytes), ctx.storage("copy dst", bytes));
+            let mut t = Vec::new();
+            for _ in 0..15 {
+                let start = Instant::now();
+                let mut enc = ctx.device.create_command_encoder(&Default::default());
+                enc.copy_buffer_to_buffer(&a, 0, &b, 0, bytes);
+                ctx.queue.submit([enc.finish()]);
+                ctx.wait()?;
+                t.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+            Some(median(&t))
+        }
+        None => None,
+    };
+    Ok(CopyFloor {
+        size: format!("{}x{}", size.width, size.height),
+        bytes,
+        cpu_ms: median(&cpu),
+        wgpu_ms,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_are_nearest_rank() {
+        let v = [5.0, 1.0, 4.0, 2.0, 3.0];
+        assert_eq!(median(&v), 3.0);
+        assert_eq!(percentile(&v, 0.95), 5.0);
+        assert_eq!(percentile(&v, 0.0), 1.0);
+        assert_eq!(median(&[]), 0.0);
+    }
+
+    #[test]
+    fn per_generated_time_shares_the_push() {
+        let mut t = TimingAcc::new(BackendKind::Cpu);
+        let ms = Duration::from_millis;
+        t.add(ms(6), &[ms(2), ms(4)], &[]);
+        let s = t.finish();
+        assert_eq!(s.push_ms, 6.0);
+        assert_eq!(s.per_generated_ms, 6.0);
+        assert_eq!(s.generate_ms, 2.0);
+    }
+}

@@ -1,0 +1,210 @@
+//! The settings `eval` compares: every knob of [`framegen::Settings`] that
+//! trades time for accuracy (issue 8, DESIGN §9), one axis at a time
+//! around the defaults.
+
+use framegen::{Method, Settings};
+use protocol::FrameSize;
+use protocol::wire::WindowMode;
+use serde::Serialize;
+
+/// What a variant changes relative to its method's defaults.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Axis {
+    /// A method at its defaults (the baseline of every other axis).
+    Method,
+    /// GFFE history length k (Alg. 1).
+    History,
+    /// GFFE background levels L (§4.2).
+    Levels,
+    /// Push-pull pyramid depth of the hole fill.
+    Pyramid,
+    /// The static-test threshold ε (Alg. 1).
+    Epsilon,
+    /// The adaptive rendering window (GFFE §4.3, DESIGN §4.5).
+    Window,
+    /// Generated frames per rendered frame.
+    N,
+    /// Rendered (and displayed) resolution.
+    Resolution,
+}
+
+impl Axis {
+    /// Heading in the report.
+    pub fn title(self) -> &'static str {
+        match self {
+            Axis::Method => "methods at their defaults",
+            Axis::History => "history length k (gffe)",
+            Axis::Levels => "background levels L (gffe)",
+            Axis::Pyramid => "push-pull pyramid depth",
+            Axis::Epsilon => "static threshold ε (gffe)",
+            Axis::Window => "adaptive window",
+            Axis::N => "generated frames per rendered frame n",
+            Axis::Resolution => "resolution",
+        }
+    }
+}
+
+/// Which variants to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Sweep {
+    /// The four methods at their defaults.
+    Methods,
+    /// Every axis (history, levels, pyramid, ε, window, n) around the
+    /// defaults.
+    Full,
+}
+
+/// One configuration to measure.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variant {
+    /// Short unique name, e.g. `gffe k=4`.
+    pub label: String,
+    /// What it varies.
+    pub axis: Axis,
+    /// The generator's settings.
+    pub settings: Settings,
+    /// The adaptive window the frames are rendered with.
+    pub window: WindowMode,
+    /// The displayed size.
+    pub size: FrameSize,
+}
+
+impl Variant {
+    fn new(axis: Axis, label: String, settings: Settings, size: FrameSize) -> Self {
+        Self {
+            label,
+            axis,
+            settings,
+            window: WindowMode::Off,
+            size,
+        }
+    }
+
+    /// Frames the renderer makes per generated-frame group: n + 1.
+    pub fn step(&self) -> usize {
+        self.settings.n as usize + 1
+    }
+
+    /// Render intervals of latency the method adds (interpolation holds
+    /// one frame back, DESIGN §6).
+    pub fn added_latency_frames(&self) -> u32 {
+        u32::from(self.settings.method == Method::Interp)
+    }
+}
+
+/// The name of a window mode in labels and on the command line.
+pub fn window_name(mode: WindowMode) -> &'static str {
+    match mode {
+        WindowMode::Off => "off",
+        WindowMode::KeepDensity => "keep-density",
+        WindowMode::KeepSize => "keep-size",
+    }
+}
+
+/// The variants of one scene at `size`; `windows` is false for dumps (their
+/// window is whatever they were rendered with).
+pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
+    let at = |m| Settings::for_method(m);
+    let mut out: Vec<Variant> = Method::ALL
+        .into_iter()
+        .map(|m| Variant::new(Axis::Method, m.name().into(), at(m), size))
+        .collect();
+    if kind == Sweep::Methods {
+        return out;
+    }
+    let gffe = at(Method::Gffe);
+    for k in [3, 4, 8] {
+        let s = Settings { history: k, ..gffe };
+        out.push(Variant::new(Axis::History, format!("gffe k={k}"), s, size));
+    }
+    for l in [0, 1, 3] {
+        let s = Settings {
+            background_levels: l,
+            ..gffe
+        };
+        out.push(Variant::new(Axis::Levels, format!("gffe L={l}"), s, size));
+    }
+    for method in [Method::Gffe, Method::Interp] {
+        for levels in [1, 3, 5] {
+            let s = Settings {
+                pushpull_levels: levels,
+                ..at(method)
+            };
+            let label = format!("{method} pyramid={levels}");
+            out.push(Variant::new(Axis::Pyramid, label, s, size));
+        }
+    }
+    for eps in [0.25, 2.0] {
+        let s = Settings {
+            static_epsilon: eps,
+            ..gffe
+        };
+        out.push(Variant::new(Axis::Epsilon, format!("gffe ε={eps}"), s, size));
+    }
+    if windows {
+        // Interpolation works on the rendered grid and ignores the window.
+        for method in [Method::Reproject, Method::Gffe] {
+            for mode in [WindowMode::KeepDensity, WindowMode::KeepSize] {
+                let settings = Settings {
+                    display_size: (mode == WindowMode::KeepSize).then_some((size.width, size.height)),
+                    ..at(method)
+                };
+                let mut v = Variant::new(
+                    Axis::Window,
+                    format!("{method} window={}", window_name(mode)),
+                    settings,
+                    size,
+                );
+                v.window = mode;
+                out.push(v);
+            }
+        }
+    }
+    for n in [2, 3] {
+        for method in Method::ALL {
+            let s = Settings { n, ..at(method) };
+            out.push(Variant::new(Axis::N, format!("{method} n={n}"), s, size));
+        }
+    }
+    out
+}
+
+/// The methods at their defaults at each extra resolution.
+pub fn resolutions(sizes: &[FrameSize]) -> Vec<Variant> {
+    sizes
+        .iter()
+        .flat_map(|&size| {
+            Method::ALL.into_iter().map(move |m| {
+                Variant::new(
+                    Axis::Resolution,
+                    format!("{m} {}p", size.height),
+                    Settings::for_method(m),
+                    size,
+                )
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_are_unique_and_settings_valid() {
+        let size = FrameSize::new(64, 36);
+        let mut all = sweep(Sweep::Full, size, true);
+        all.extend(resolutions(&[FrameSize::new(96, 54)]));
+        let mut labels: Vec<&str> = all.iter().map(|v| v.label.as_str()).collect();
+        labels.sort_unstable();
+        let before = labels.len();
+        labels.dedup();
+        assert_eq!(labels.len(), before);
+        for v in &all {
+            v.settings.validate().unwrap();
+        }
+        assert_eq!(sweep(Sweep::Methods, size, true).len(), 4);
+        assert!(!sweep(Sweep::Full, size, false).iter().any(|v| v.axis == Axis::Window));
+    }
+}
