@@ -60,17 +60,26 @@ impl Backend for CpuBackend {
                 track: &p.history.track,
             })
         });
-        let hist = timed(t, Pass::History, || {
-            history::track(
-                &plan.camera,
-                &frame.depth,
-                &frame.motion,
-                prev_history,
-                plan.k,
-                plan.epsilon,
-                plan.tolerance,
-            )
-        });
+        // k = 0 (repeat): nothing to track or collect.
+        let hist = if plan.k == 0 {
+            history::History {
+                positions: Vec::new(),
+                track: Vec::new(),
+                dynamic: 0,
+            }
+        } else {
+            timed(t, Pass::History, || {
+                history::track(
+                    &plan.camera,
+                    &frame.depth,
+                    &frame.motion,
+                    prev_history,
+                    plan.k,
+                    plan.epsilon,
+                    plan.tolerance,
+                )
+            })
+        };
         let n = frame.depth.len();
         let prev_bg = prev
             .as_ref()
@@ -80,17 +89,21 @@ impl Backend for CpuBackend {
                 levels: p.levels,
                 texels: &p.background,
             });
-        let bg = timed(t, Pass::Background, || {
-            background::collect(
-                &plan.camera,
-                &hist.positions[..n],
-                &hist.track,
-                &frame.color,
-                plan.levels,
-                prev_bg,
-                plan.tolerance,
-            )
-        });
+        let bg = if plan.k == 0 {
+            Vec::new()
+        } else {
+            timed(t, Pass::Background, || {
+                background::collect(
+                    &plan.camera,
+                    &hist.positions[..n],
+                    &hist.track,
+                    &frame.color,
+                    plan.levels,
+                    prev_bg,
+                    plan.tolerance,
+                )
+            })
+        };
         let dynamic = hist.dynamic;
         self.previous = prev;
         self.current = Some(FrameState {

@@ -98,7 +98,10 @@ mod tests {
             .collect();
         frames[3].meta.cut = true;
         let kept = decimate(&frames, 2);
-        assert_eq!(kept.iter().map(|f| f.meta.cut).collect::<Vec<_>>(), [false, false, true]);
+        assert_eq!(
+            kept.iter().map(|f| f.meta.cut).collect::<Vec<_>>(),
+            [false, false, true]
+        );
     }
 
     #[test]

@@ -167,7 +167,8 @@ pub struct IngestPlan {
     pub camera: PassCamera,
     /// `C_{t−1}` relative to `C_t`'s centre; `None` restarts the history.
     pub prev: Option<PassCamera>,
-    /// History length (1 = none).
+    /// History length (1 = positions of this frame and the static test
+    /// only, 0 = no tracking at all: `repeat` needs none).
     pub k: u32,
     /// Static-test threshold.
     pub epsilon: f32,
@@ -379,8 +380,10 @@ impl FrameGenerator {
         let mut prev_time = prev_time;
         if plan.prev.is_some() {
             let fraction = dynamic as f32 / prepared.valid.max(1) as f32;
-            if fraction > self.settings.cut_dynamic_fraction && self.settings.method == Method::Gffe
-            {
+            // Every method that tracks (all but repeat) detects cuts: an
+            // undetected cut would extrapolate the camera across the jump
+            // (reproject, gffe) or blend two shots (interp).
+            if plan.k > 0 && fraction > self.settings.cut_dynamic_fraction {
                 tracing::debug!(
                     frame = meta.index,
                     fraction,

@@ -155,10 +155,13 @@ impl Settings {
         Ok(())
     }
 
-    /// `k` as the passes use it: 1 (no history) for the baselines.
+    /// `k` as the passes use it: the setting for gffe; 1 (this frame's
+    /// positions and the static test, which detects cuts) for reproject
+    /// and interp; 0 (no tracking) for repeat, which only crops.
     pub fn effective_history(&self) -> u32 {
         match self.method {
             Method::Gffe => self.history,
+            Method::Repeat => 0,
             _ => 1,
         }
     }

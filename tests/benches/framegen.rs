@@ -1,14 +1,16 @@
-//! Per-pass times of the GFFE and GeoMotionGen pipelines (and every
-//! method's total) on the
-//! CPU reference and on wgpu, at 720p on the default scene.
+//! Per-pass times of the GFFE and GeoMotionGen pipelines, and every
+//! method's total (push + one generated frame), on the CPU reference and on
+//! wgpu, at 540p, 720p and 1080p on the default scene.
 //!
 //! wgpu times are wall time of submit + wait per pass (the profiled
-//! backend); lavapipe's timestamp queries report ~0 for real work. The
-//! `copy` entry is a device buffer copy of the bytes a frame's inputs take
-//! (color f32x4 + depth + motion, 28 B/px): the bandwidth floor each pass
-//! can be compared with.
+//! backend); lavapipe's timestamp queries report ~0 for real work. Each
+//! group has a `copy` entry in the same run: a copy of the bytes a frame's
+//! inputs take (color f32x4 + depth + motion, 28 B/px), a device buffer
+//! copy for wgpu and a host memcpy for the CPU. It is the bandwidth floor:
+//! divide a pass's time by it for the pass's cost in copies.
 //!
-//! `cargo bench -p tests --bench framegen [-- FILTER]`; `FRAMEGEN_BENCH_SIZE=1280x720` by default.
+//! `cargo bench -p tests --bench framegen [-- FILTER]`, e.g. `-- wgpu/1280x720`;
+//! `FRAMEGEN_BENCH_SIZES=960x540,1280x720,1920x1080` by default.
 
 use std::time::Duration;
 
@@ -16,10 +18,15 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use framegen::{FrameGenerator, GpuBackend, GpuContext, Method, Pass, Settings};
 use protocol::{Frame, FrameSize};
 
-fn size() -> FrameSize {
-    let s = std::env::var("FRAMEGEN_BENCH_SIZE").unwrap_or_else(|_| "1280x720".into());
-    let (w, h) = s.split_once('x').expect("WIDTHxHEIGHT");
-    FrameSize::new(w.parse().expect("width"), h.parse().expect("height"))
+fn sizes() -> Vec<FrameSize> {
+    let s = std::env::var("FRAMEGEN_BENCH_SIZES")
+        .unwrap_or_else(|_| "960x540,1280x720,1920x1080".into());
+    s.split(',')
+        .map(|s| {
+            let (w, h) = s.split_once('x').expect("WIDTHxHEIGHT");
+            FrameSize::new(w.parse().expect("width"), h.parse().expect("height"))
+        })
+        .collect()
 }
 
 /// Fed frames with times that keep increasing when the sequence wraps.
@@ -46,7 +53,12 @@ fn run(g: &mut FrameGenerator, feed: &mut Feed) {
 }
 
 fn bench(c: &mut Criterion) {
-    let size = size();
+    for size in sizes() {
+        bench_size(c, size);
+    }
+}
+
+fn bench_size(c: &mut Criterion, size: FrameSize) {
     let rendered = tests::render_scene("default", size, 60.0, 60..76);
     let frames = framegen::decimate::decimate(&rendered, 2);
     let ctx = GpuContext::new().expect("GPU");
@@ -67,9 +79,12 @@ fn bench(c: &mut Criterion) {
         };
         let mut group = c.benchmark_group(format!("{backend}/{label}"));
         group
+            // Per-pass benches report one pass's time but run the whole
+            // pipeline per iteration: criterion's time targets count the
+            // reported time, so short targets still mean many full runs.
             .sample_size(10)
-            .warm_up_time(Duration::from_secs(1))
-            .measurement_time(Duration::from_secs(if gpu { 4 } else { 8 }));
+            .warm_up_time(Duration::from_millis(300))
+            .measurement_time(Duration::from_millis(1500));
         let per_pass = [
             (
                 Method::Gffe,
@@ -125,8 +140,15 @@ fn bench(c: &mut Criterion) {
                 b.iter(|| run(&mut g, &mut feed))
             });
         }
+        let bytes = size.pixels() * 28;
+        if !gpu {
+            let src = vec![1u8; bytes as usize];
+            let mut dst = vec![0u8; bytes as usize];
+            group.bench_function("copy", |b| {
+                b.iter(|| dst.copy_from_slice(std::hint::black_box(&src)))
+            });
+        }
         if gpu {
-            let bytes = size.pixels() * 28;
             let src = ctx.storage("copy src", bytes);
             let dst = ctx.storage("copy dst", bytes);
             group.bench_function("copy", |b| {

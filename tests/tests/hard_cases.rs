@@ -236,15 +236,19 @@ fn zero_time_step() {
             for alpha in alphas(method, &[1e-6, 0.5, 1.0, 3.0]) {
                 let out = g.generate(alpha).unwrap();
                 assert!(out.frame.meta.time.is_finite());
-                assert_bounded(&out, &format!("Δt=0 {method} {} α={alpha}", g.backend_name()));
+                assert_bounded(
+                    &out,
+                    &format!("Δt=0 {method} {} α={alpha}", g.backend_name()),
+                );
             }
         }
     }
 }
 
 /// A flagged cut restarts the history; an unflagged one (a different
-/// scene's frame) is detected by its share of dynamic pixels. After either,
-/// every method shows the new shot, not the old one.
+/// scene's frame through the same lens) is detected by its share of
+/// dynamic pixels by every method that tracks (all but repeat). After
+/// either, every method shows the new shot, not the old one.
 #[test]
 fn camera_cuts() {
     use framegen::PushOutcome;
@@ -263,22 +267,35 @@ fn camera_cuts() {
                 let mut cut = after[0].clone();
                 cut.meta.cut = flagged;
                 cut.meta.time = before.last().unwrap().meta.time + 1.0 / 30.0;
+                // Same lens: only the content tells (a projection change
+                // restarts by itself).
+                cut.meta.camera.projection = before.last().unwrap().meta.camera.projection;
                 let outcome = g.push(&cut).unwrap();
-                assert!(
+                // Repeat tracks nothing: it has nothing to restart.
+                let restarts = flagged || method != Method::Repeat;
+                assert_eq!(
                     matches!(outcome, PushOutcome::Restarted { .. }),
+                    restarts,
                     "{method} flagged={flagged}: {outcome:?}"
                 );
                 for alpha in alphas(method, &[0.5, 3.0]) {
                     let out = g.generate(alpha).unwrap();
-                    let what = format!("cut flagged={flagged} {method} {} α={alpha}", g.backend_name());
+                    let what = format!(
+                        "cut flagged={flagged} {method} {} α={alpha}",
+                        g.backend_name()
+                    );
                     assert_bounded(&out, &what);
                     // The output shows the new shot. Measured: identical
                     // to it (∞ dB: one frame after a restart carries no
                     // motion), 7.58 dB against the old one.
                     let new = framegen::psnr(&encode(&out.frame), &encode(&cut)).unwrap();
-                    let old = framegen::psnr(&encode(&out.frame), &encode(before.last().unwrap())).unwrap();
+                    let old = framegen::psnr(&encode(&out.frame), &encode(before.last().unwrap()))
+                        .unwrap();
                     eprintln!("{what}: {new:.2} dB vs new shot, {old:.2} dB vs old");
-                    assert!(new > old + 8.0, "{what}: {new:.2} dB vs new shot, {old:.2} dB vs old");
+                    assert!(
+                        new > old + 8.0,
+                        "{what}: {new:.2} dB vs new shot, {old:.2} dB vs old"
+                    );
                 }
             }
         }
@@ -332,9 +349,17 @@ fn analytic(
     let out = g.generate(0.5).unwrap();
     // Extrapolation stands for time 3.5, interpolation for 2.5 (in render
     // intervals): frame 7 or 5 at twice the rate.
-    let truth = tests::render_by(path, if interp { 5 } else { 7 }, 2.0 * render_fps, origin, size);
+    let truth = tests::render_by(
+        path,
+        if interp { 5 } else { 7 },
+        2.0 * render_fps,
+        origin,
+        size,
+    );
     let enc = |f: &Frame| framegen::display_encode(size.width, size.height, &f.color).unwrap();
-    let psnr = framegen::psnr(&enc(&out.frame), &enc(&truth)).unwrap().min(100.0);
+    let psnr = framegen::psnr(&enc(&out.frame), &enc(&truth))
+        .unwrap()
+        .min(100.0);
     (out, psnr)
 }
 
@@ -358,7 +383,9 @@ fn huge_world_coordinates() {
             let (reference, name) = at(DVec3::ZERO);
             for offset in [1e5, 1e7] {
                 let (psnr, _) = at(DVec3::new(offset, 0.0, -offset));
-                eprintln!("{method} {name}: origin {reference:.2} dB, offset {offset:e} {psnr:.2} dB");
+                eprintln!(
+                    "{method} {name}: origin {reference:.2} dB, offset {offset:e} {psnr:.2} dB"
+                );
                 assert!(
                     (psnr - reference).abs() < 0.5,
                     "{method} {name} at {offset:e}: {psnr:.2} dB vs {reference:.2} dB at the origin"
@@ -384,7 +411,10 @@ fn motion_larger_than_the_frame() {
         .iter()
         .map(|m| m[0].hypot(m[1]))
         .fold(0.0f32, f32::max);
-    assert!(largest > SIZE.width as f32, "vectors only reach {largest} px");
+    assert!(
+        largest > SIZE.width as f32,
+        "vectors only reach {largest} px"
+    );
     for method in Method::ALL {
         for mut g in generators(&ctx, method) {
             let (out, psnr) = analytic(&mut g, tests::spin_camera, DVec3::ZERO, SIZE, 0.8);
@@ -394,7 +424,11 @@ fn motion_larger_than_the_frame() {
             assert!(psnr > 6.0, "{what}: {psnr:.2} dB");
             // Eight more extrapolations out to α = 8 (or interp's 1).
             for j in 1..=8 {
-                let alpha = if method == Method::Interp { 1.0 } else { f64::from(j) };
+                let alpha = if method == Method::Interp {
+                    1.0
+                } else {
+                    f64::from(j)
+                };
                 assert_bounded(&g.generate(alpha).unwrap(), &format!("{what} α={alpha}"));
             }
         }
@@ -429,7 +463,10 @@ fn half_turn_within_one_frame() {
                 assert_bounded(&out, &what);
                 let cam = out.frame.meta.camera;
                 assert!(cam.pose.position.is_finite(), "{what}");
-                assert!((cam.pose.rotation.length() - 1.0).abs() < 1e-9, "{what}: {cam:?}");
+                assert!(
+                    (cam.pose.rotation.length() - 1.0).abs() < 1e-9,
+                    "{what}: {cam:?}"
+                );
             }
         }
     }
@@ -455,7 +492,12 @@ fn tiny_and_extreme_aspect_frames() {
         for method in Method::ALL {
             for mut g in generators(&ctx, method) {
                 let (out, psnr) = analytic(&mut g, tests::spin_camera, DVec3::ZERO, size, 30.0);
-                let what = format!("{}x{} {method} {}", size.width, size.height, g.backend_name());
+                let what = format!(
+                    "{}x{} {method} {}",
+                    size.width,
+                    size.height,
+                    g.backend_name()
+                );
                 assert_eq!(out.frame.meta.size, size, "{what}");
                 assert_bounded(&out, &what);
                 eprintln!("{what}: {psnr:.2} dB");
@@ -468,7 +510,10 @@ fn tiny_and_extreme_aspect_frames() {
                         let values = fed.iter().map(|f| f.color[0][c].to_f32());
                         let lo = values.clone().fold(f32::INFINITY, f32::min);
                         let hi = values.fold(f32::NEG_INFINITY, f32::max);
-                        assert!((lo - 1e-3..=hi + 1e-3).contains(&v), "{what}: {v} not in [{lo}, {hi}]");
+                        assert!(
+                            (lo - 1e-3..=hi + 1e-3).contains(&v),
+                            "{what}: {v} not in [{lo}, {hi}]"
+                        );
                     }
                 } else {
                     assert!(psnr > 5.0, "{what}: {psnr:.2} dB");

@@ -42,7 +42,11 @@ pub fn write(out: &Path, scene: &str, frame: u64, captures: &[Capture]) -> anyho
         let col = c as u32 + 1;
         blit(col, 0, &cap.test.to_rgb8());
         blit(col, 1, &cap.flip.apply_color_lut(&lut).to_vec());
-        tracing::debug!("{scene} frame {frame}: {} ꟻLIP {:.4}", cap.label, cap.flip_mean);
+        tracing::debug!(
+            "{scene} frame {frame}: {} ꟻLIP {:.4}",
+            cap.label,
+            cap.flip_mean
+        );
     }
     let dir = out.join("heatmaps");
     std::fs::create_dir_all(&dir)?;

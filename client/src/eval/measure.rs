@@ -41,7 +41,8 @@ impl Region {
 /// default viewing conditions (0.7 m from a 0.7 m wide 4K monitor, 67
 /// pixels per degree).
 pub fn flip_map(reference: &DisplayImage, test: &DisplayImage) -> nv_flip::FlipImageFloat {
-    let r = nv_flip::FlipImageRgb8::with_data(reference.width, reference.height, &reference.to_rgb8());
+    let r =
+        nv_flip::FlipImageRgb8::with_data(reference.width, reference.height, &reference.to_rgb8());
     let t = nv_flip::FlipImageRgb8::with_data(test.width, test.height, &test.to_rgb8());
     nv_flip::flip(r, t, nv_flip::DEFAULT_PIXELS_PER_DEGREE)
 }
@@ -277,7 +278,13 @@ mod tests {
     fn identical_images_score_perfectly_and_errors_land_in_their_region() {
         let a = image(32, 16, |x, y| ((x / 4 + y / 4) % 2) as f32 * 0.8 + 0.1);
         let regions: Vec<Region> = (0..32 * 16)
-            .map(|i| if i % 32 < 8 { Region::Disoccluded } else { Region::Static })
+            .map(|i| {
+                if i % 32 < 8 {
+                    Region::Disoccluded
+                } else {
+                    Region::Static
+                }
+            })
             .collect();
         let same = score(&a, &a, &regions).unwrap();
         assert_eq!(same.psnr, PSNR_CAP);
@@ -286,7 +293,11 @@ mod tests {
 
         // Damage only the left quarter (the disoccluded region).
         let b = image(32, 16, |x, y| {
-            if x < 8 { 1.0 - a.rgb[(y * 32 + x) as usize][0] } else { a.rgb[(y * 32 + x) as usize][0] }
+            if x < 8 {
+                1.0 - a.rgb[(y * 32 + x) as usize][0]
+            } else {
+                a.rgb[(y * 32 + x) as usize][0]
+            }
         });
         let s = score(&b, &a, &regions).unwrap();
         let [dis, _, stat] = s.regions;

@@ -126,7 +126,11 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         if !config.only.is_empty() {
             variants.retain(|v| config.only.iter().any(|o| v.label.contains(o.as_str())));
         }
-        anyhow::ensure!(!variants.is_empty(), "no variant matches --only {:?}", config.only);
+        anyhow::ensure!(
+            !variants.is_empty(),
+            "no variant matches --only {:?}",
+            config.only
+        );
         // One pass of the sequence per (size, window): the frames differ.
         let mut groups: Vec<((FrameSize, WindowMode), Vec<Variant>)> = Vec::new();
         for v in variants.iter().cloned() {
@@ -143,15 +147,26 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             if !sizes.contains(&gsize) {
                 sizes.push(gsize);
             }
-            let mut seq = Sequence::open(input, gsize, config.fps, window, config.start, config.frames)?;
-            let bar = progress_bar(config, seq.len(), &format!(
-                "{name} [{}/{}] {}x{} window {}",
-                g + 1,
-                group_count,
-                gsize.width,
-                gsize.height,
-                variant::window_name(window)
-            ));
+            let mut seq = Sequence::open(
+                input,
+                gsize,
+                config.fps,
+                window,
+                config.start,
+                config.frames,
+            )?;
+            let bar = progress_bar(
+                config,
+                seq.len(),
+                &format!(
+                    "{name} [{}/{}] {}x{} window {}",
+                    g + 1,
+                    group_count,
+                    gsize.width,
+                    gsize.height,
+                    variant::window_name(window)
+                ),
+            );
             let heat = (index < config.heatmap_inputs
                 && window == WindowMode::Off
                 && gsize == size)
@@ -160,7 +175,12 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             bar.finish_and_clear();
             rows.extend(out.rows);
             for (truth_index, captures) in out.heat {
-                let file = heatmap::write(&config.out, &name, config.start + truth_index as u64, &captures)?;
+                let file = heatmap::write(
+                    &config.out,
+                    &name,
+                    config.start + truth_index as u64,
+                    &captures,
+                )?;
                 heatmaps.push(file);
             }
         }

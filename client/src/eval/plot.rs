@@ -14,7 +14,7 @@ use std::sync::OnceLock;
 use plotters::prelude::*;
 
 use super::BackendKind;
-use super::report::{Report, Row, plot_name, pareto};
+use super::report::{Report, Row, pareto, plot_name};
 use super::variant::Axis;
 
 const FONT_PATHS: [&str; 3] = [
@@ -67,7 +67,11 @@ pub fn write_all(report: &Report, out: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(&dir)?;
     for scene in &report.scenes {
         // The main resolution only: other sizes have other errors and times.
-        let size = scene.rows.first().map(|r| r.size.clone()).unwrap_or_default();
+        let size = scene
+            .rows
+            .first()
+            .map(|r| r.size.clone())
+            .unwrap_or_default();
         let rows: Vec<&Row> = scene
             .rows
             .iter()
@@ -79,7 +83,11 @@ pub fn write_all(report: &Report, out: &Path) -> anyhow::Result<()> {
             .map(|&b| (b, points(&rows, b)))
             .collect();
         let title = format!("{} ({size}, n = 1)", scene.scene);
-        draw(&dir.join(format!("{}.png", plot_name(&scene.scene))), &title, &panels)?;
+        draw(
+            &dir.join(format!("{}.png", plot_name(&scene.scene))),
+            &title,
+            &panels,
+        )?;
     }
     // Means over the scenes that have the variant.
     if let Some(first) = report.scenes.first() {
@@ -102,7 +110,8 @@ pub fn write_all(report: &Report, out: &Path) -> anyhow::Result<()> {
                             label: row.label.clone(),
                             method: row.method.clone(),
                             ms: ms.iter().sum::<f64>() / ms.len() as f64,
-                            flip: same.iter().map(|r| r.quality.flip).sum::<f64>() / same.len() as f64,
+                            flip: same.iter().map(|r| r.quality.flip).sum::<f64>()
+                                / same.len() as f64,
                             zero_latency: row.added_latency_frames == 0,
                         })
                     })
@@ -143,7 +152,8 @@ fn draw(path: &Path, title: &str, panels: &[(BackendKind, Vec<Point>)]) -> anyho
         }
         root.present().map_err(plot_err)?;
     }
-    let img = image::RgbImage::from_raw(w * cols, h, buf).ok_or_else(|| anyhow::anyhow!("plot buffer size"))?;
+    let img = image::RgbImage::from_raw(w * cols, h, buf)
+        .ok_or_else(|| anyhow::anyhow!("plot buffer size"))?;
     img.save(path)?;
     Ok(())
 }

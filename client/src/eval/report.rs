@@ -103,7 +103,12 @@ pub struct Row {
 
 impl Row {
     /// Assembles a row.
-    pub fn new(v: &Variant, quality: Quality, timing: Vec<TimingAcc>, agreement: Option<f64>) -> Self {
+    pub fn new(
+        v: &Variant,
+        quality: Quality,
+        timing: Vec<TimingAcc>,
+        agreement: Option<f64>,
+    ) -> Self {
         let s = &v.settings;
         Self {
             label: v.label.clone(),
@@ -149,9 +154,10 @@ pub fn pareto(points: &[(f64, f64)]) -> Vec<usize> {
     (0..points.len())
         .filter(|&i| {
             let (a, b) = points[i];
-            !points.iter().enumerate().any(|(j, &(c, d))| {
-                j != i && c <= a && d <= b && (c < a || d < b)
-            })
+            !points
+                .iter()
+                .enumerate()
+                .any(|(j, &(c, d))| j != i && c <= a && d <= b && (c < a || d < b))
         })
         .collect()
 }
@@ -261,7 +267,10 @@ impl Report {
             self.machine.cpu_threads,
             self.machine.adapter.as_deref().unwrap_or("none")
         );
-        let _ = writeln!(md, "Times are ms per generated frame: (push + n generations) / n, the median over the sequence.\n");
+        let _ = writeln!(
+            md,
+            "Times are ms per generated frame: (push + n generations) / n, the median over the sequence.\n"
+        );
         for b in &self.backends {
             let _ = writeln!(md, "* `{}`: {}.", b.name(), super::timing::method_of(*b));
         }
@@ -272,7 +281,10 @@ impl Report {
              added latency) is admitted.\n"
         );
         let _ = writeln!(md, "## Bandwidth floor\n");
-        let _ = writeln!(md, "A copy of the bytes a frame's inputs take (28 B/px), which any pass reads at least once.\n");
+        let _ = writeln!(
+            md,
+            "A copy of the bytes a frame's inputs take (28 B/px), which any pass reads at least once.\n"
+        );
         let _ = writeln!(md, "| size | bytes | CPU memcpy ms | wgpu buffer copy ms |");
         let _ = writeln!(md, "|---|---|---|---|");
         for c in &self.copy_floor {
@@ -307,7 +319,10 @@ impl Report {
     /// is on a front.
     fn summary(&self, md: &mut String) {
         let _ = writeln!(md, "\n## Summary: methods at their defaults\n");
-        let methods: Vec<String> = framegen::Method::ALL.iter().map(|m| m.name().to_string()).collect();
+        let methods: Vec<String> = framegen::Method::ALL
+            .iter()
+            .map(|m| m.name().to_string())
+            .collect();
         let _ = write!(md, "| scene |");
         for m in &methods {
             let _ = write!(md, " {m} PSNR / ꟻLIP |");
@@ -317,7 +332,11 @@ impl Report {
         for scene in &self.scenes {
             let _ = write!(md, "| {} |", scene.scene);
             for m in &methods {
-                match scene.rows.iter().find(|r| r.axis == Axis::Method && &r.method == m) {
+                match scene
+                    .rows
+                    .iter()
+                    .find(|r| r.axis == Axis::Method && &r.method == m)
+                {
                     Some(r) => {
                         let _ = write!(md, " {:.2} / {:.4} |", r.quality.psnr, r.quality.flip);
                     }
@@ -328,7 +347,10 @@ impl Report {
             }
             let _ = writeln!(md);
         }
-        let _ = writeln!(md, "\n### How often each variant is on the zero-latency front\n");
+        let _ = writeln!(
+            md,
+            "\n### How often each variant is on the zero-latency front\n"
+        );
         let _ = write!(md, "| variant |");
         for b in &self.backends {
             let _ = write!(md, " {} (of {} scenes) |", b.name(), self.scenes.len());
@@ -350,7 +372,10 @@ impl Report {
                 .collect();
             let _ = write!(md, "| {} |", row.label);
             for b in &self.backends {
-                let on = same.iter().filter(|r| r.front_zero_latency.contains(b)).count();
+                let on = same
+                    .iter()
+                    .filter(|r| r.front_zero_latency.contains(b))
+                    .count();
                 let _ = write!(md, " {on} / {} |", same.len());
             }
             let mean = |f: &dyn Fn(&Row) -> Option<f64>| {
@@ -367,7 +392,11 @@ impl Report {
 
     fn scene_section(&self, md: &mut String, scene: &SceneReport) {
         let _ = writeln!(md, "\n## {}\n", scene.scene);
-        let _ = writeln!(md, "![ꟻLIP against ms](plots/{}.png)\n", plot_name(&scene.scene));
+        let _ = writeln!(
+            md,
+            "![ꟻLIP against ms](plots/{}.png)\n",
+            plot_name(&scene.scene)
+        );
         let _ = write!(
             md,
             "| variant | size | PSNR | SSIM | ꟻLIP | disoccluded % / ꟻLIP | dynamic % / ꟻLIP | static ꟻLIP | bg / filled % |"
@@ -376,7 +405,11 @@ impl Report {
             let _ = write!(md, " {} ms |", b.name());
         }
         let _ = writeln!(md, " front | backends agree (dB) |");
-        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|{}---|---|", "---|".repeat(self.backends.len()));
+        let _ = writeln!(
+            md,
+            "|---|---|---|---|---|---|---|---|---|{}---|---|",
+            "---|".repeat(self.backends.len())
+        );
         let mut axis = None;
         for r in &scene.rows {
             if axis != Some(r.axis) {
@@ -411,7 +444,11 @@ impl Report {
                 100.0 * q.sources.filled,
             );
             for &b in &self.backends {
-                let _ = write!(md, " {} |", r.ms(b).map_or("—".into(), |v| format!("{v:.2}")));
+                let _ = write!(
+                    md,
+                    " {} |",
+                    r.ms(b).map_or("—".into(), |v| format!("{v:.2}"))
+                );
             }
             let marks: Vec<String> = self
                 .backends
@@ -423,15 +460,23 @@ impl Report {
                 md,
                 " {} | {} |",
                 marks.join(" "),
-                r.backend_agreement_psnr.map_or("—".into(), |p| format!("{p:.1}"))
+                r.backend_agreement_psnr
+                    .map_or("—".into(), |p| format!("{p:.1}"))
             );
         }
         // Per-pass breakdown of the methods at their defaults.
-        let _ = writeln!(md, "\nPer pass, ms per rendered frame (push + its n generations), methods at their defaults:\n");
+        let _ = writeln!(
+            md,
+            "\nPer pass, ms per rendered frame (push + its n generations), methods at their defaults:\n"
+        );
         for &b in &self.backends {
             for r in scene.rows.iter().filter(|r| r.axis == Axis::Method) {
                 if let Some(t) = r.timing.iter().find(|t| t.backend == b) {
-                    let passes: Vec<String> = t.passes.iter().map(|p| format!("{} {:.2}", p.pass, p.ms)).collect();
+                    let passes: Vec<String> = t
+                        .passes
+                        .iter()
+                        .map(|p| format!("{} {:.2}", p.pass, p.ms))
+                        .collect();
                     let _ = writeln!(md, "* {} `{}`: {}", b.name(), r.label, passes.join(", "));
                 }
             }
@@ -443,7 +488,13 @@ impl Report {
 pub fn plot_name(scene: &str) -> String {
     scene
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect()
 }
 

@@ -79,7 +79,11 @@ impl Sequence {
             Input::Scene(spec) => {
                 let renderer = || -> anyhow::Result<Box<Renderer>> {
                     let scene = Scene::load(spec).with_context(|| format!("scene {spec}"))?;
-                    Ok(Box::new(Renderer::new(scene, size, std::path::Path::new("."))?))
+                    Ok(Box::new(Renderer::new(
+                        scene,
+                        size,
+                        std::path::Path::new("."),
+                    )?))
                 };
                 let windowed = if window == WindowMode::Off {
                     None
@@ -105,7 +109,10 @@ impl Sequence {
                 let reader =
                     DumpReader::open(dir).with_context(|| format!("dump {}", dir.display()))?;
                 let len = reader.len();
-                anyhow::ensure!(start < len, "the dump has {len} frames; --start {start} is past it");
+                anyhow::ensure!(
+                    start < len,
+                    "the dump has {len} frames; --start {start} is past it"
+                );
                 let fps = reader.manifest().fps;
                 Ok(Self {
                     source: Source::Dump(reader),
@@ -153,6 +160,13 @@ impl Sequence {
                     reader
                         .read_frame(i)
                         .with_context(|| format!("dump frame {i}"))?,
+                );
+                // A widened frame is no ground truth for the displayed view.
+                anyhow::ensure!(
+                    f.meta.camera.window == protocol::Window::FULL,
+                    "dump frame {i} was rendered with an adaptive window ({:?}); eval needs plain \
+                     frames as ground truth (record with --window off)",
+                    f.meta.camera.window
                 );
                 Step {
                     fed: f.clone(),

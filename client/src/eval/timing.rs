@@ -54,7 +54,8 @@ impl TimingAcc {
         self.push.push(ms(push));
         self.generate.extend(generated.iter().map(|&d| ms(d)));
         let total = ms(push) + generated.iter().map(|&d| ms(d)).sum::<f64>();
-        self.per_generated.push(total / generated.len().max(1) as f64);
+        self.per_generated
+            .push(total / generated.len().max(1) as f64);
         for p in passes {
             *self.passes.entry(p.pass.name()).or_default() += ms(p.time);
         }
@@ -74,7 +75,10 @@ impl TimingAcc {
             passes: self
                 .passes
                 .iter()
-                .map(|(&name, &sum)| PassMs { pass: name, ms: sum / n })
+                .map(|(&name, &sum)| PassMs {
+                    pass: name,
+                    ms: sum / n,
+                })
                 .collect(),
         }
     }
@@ -158,7 +162,10 @@ pub fn copy_floor(size: FrameSize, ctx: Option<&GpuContext>) -> anyhow::Result<C
     }
     let wgpu_ms = match ctx {
         Some(ctx) => {
-            let (a, b) = (ctx.storage("copy src", bytes), ctx.storage("copy dst", bytes));
+            let (a, b) = (
+                ctx.storage("copy src", bytes),
+                ctx.storage("copy dst", bytes),
+            );
             let mut t = Vec::new();
             for _ in 0..15 {
                 let start = Instant::now();

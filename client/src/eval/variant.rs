@@ -140,14 +140,20 @@ pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
             static_epsilon: eps,
             ..gffe
         };
-        out.push(Variant::new(Axis::Epsilon, format!("gffe ε={eps}"), s, size));
+        out.push(Variant::new(
+            Axis::Epsilon,
+            format!("gffe ε={eps}"),
+            s,
+            size,
+        ));
     }
     if windows {
         // Interpolation works on the rendered grid and ignores the window.
         for method in [Method::Reproject, Method::Gffe] {
             for mode in [WindowMode::KeepDensity, WindowMode::KeepSize] {
                 let settings = Settings {
-                    display_size: (mode == WindowMode::KeepSize).then_some((size.width, size.height)),
+                    display_size: (mode == WindowMode::KeepSize)
+                        .then_some((size.width, size.height)),
                     ..at(method)
                 };
                 let mut v = Variant::new(
@@ -205,6 +211,10 @@ mod tests {
             v.settings.validate().unwrap();
         }
         assert_eq!(sweep(Sweep::Methods, size, true).len(), 4);
-        assert!(!sweep(Sweep::Full, size, false).iter().any(|v| v.axis == Axis::Window));
+        assert!(
+            !sweep(Sweep::Full, size, false)
+                .iter()
+                .any(|v| v.axis == Axis::Window)
+        );
     }
 }

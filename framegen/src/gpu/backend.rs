@@ -134,6 +134,16 @@ impl Recorder<'_> {
         Ok(())
     }
 
+    /// [`Recorder::pass`] when `run`, else nothing (and no timing).
+    fn pass_if(
+        &mut self,
+        run: bool,
+        pass: Pass,
+        f: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) -> Result<(), FramegenError> {
+        if run { self.pass(pass, f) } else { Ok(()) }
+    }
+
     fn flush(&mut self) -> Result<(), FramegenError> {
         if let Some(encoder) = self.encoder.take() {
             self.ctx.queue.submit([encoder.finish()]);
@@ -222,6 +232,7 @@ impl Backend for GpuBackend {
         let start = Instant::now();
         let mut buffers = match self.spare.take() {
             Some(b) if b.n == n && b.k == plan.k && b.levels == plan.levels => b,
+            // k = 0 (repeat) tracks nothing; the buffers keep a valid size.
             _ => FrameBuffers::new(ctx, n, plan.k, plan.levels, plan.camera),
         };
         buffers.camera = plan.camera;
@@ -276,7 +287,9 @@ impl Backend for GpuBackend {
             encoder: None,
             timings: &mut self.timings,
         };
-        rec.pass(Pass::History, |enc| {
+        // k = 0 (repeat): nothing to track or collect.
+        let tracked = plan.k > 0;
+        rec.pass_if(tracked, Pass::History, |enc| {
             enc.clear_buffer(&dynamic, 0, None);
             let prev_h = prev
                 .as_ref()
@@ -307,7 +320,7 @@ impl Backend for GpuBackend {
                 plan.tolerance,
             );
         })?;
-        rec.pass(Pass::Background, |enc| {
+        rec.pass_if(tracked, Pass::Background, |enc| {
             kernels.background.encode(
                 ctx,
                 enc,
@@ -324,7 +337,7 @@ impl Backend for GpuBackend {
             );
         })?;
         rec.flush()?;
-        let count = if plan.prev.is_some() {
+        let count = if plan.prev.is_some() && tracked {
             ctx.read_pod::<u32>(&dynamic, 1)?[0]
         } else {
             0
@@ -588,7 +601,11 @@ impl Backend for GpuBackend {
                     .read_pod::<f32>(&c.positions, n * c.k as usize * 4)?,
             )
             .to_vec(),
-            track: self.ctx.read_pod(&c.track, n)?,
+            track: if c.k == 0 {
+                Vec::new()
+            } else {
+                self.ctx.read_pod(&c.track, n)?
+            },
             background: self
                 .ctx
                 .read_pod(&c.background, c.levels.total() as usize)?,
