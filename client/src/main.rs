@@ -152,6 +152,11 @@ struct EvalArgs {
     /// Backends to time; quality is scored on the first.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu,wgpu")]
     backends: Vec<client::eval::BackendKind>,
+    /// How wgpu passes are timed: `auto` (GPU timestamps on a hardware
+    /// adapter, wall time on a software rasteriser, whose timestamps are
+    /// unreliable), `wall` or `timestamps`.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "wall", "timestamps"])]
+    pass_clock: String,
     /// Only the variants whose label contains one of these (e.g. `gffe,repeat n=2`).
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
@@ -239,6 +244,11 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         backends: args.backends,
         resolutions: args.resolutions,
         only: args.only,
+        pass_clock: match args.pass_clock.as_str() {
+            "wall" => Some(framegen::PassClock::Wall),
+            "timestamps" => Some(framegen::PassClock::Timestamps),
+            _ => None,
+        },
         warmup: args.warmup,
         heatmap_inputs: args.heatmap_scenes,
         heatmap_frames: args.heatmap_frames,

@@ -22,6 +22,7 @@ fn config(inputs: Vec<Input>, out: &std::path::Path) -> EvalConfig {
         backends: vec![BackendKind::Cpu, BackendKind::Wgpu],
         resolutions: vec![],
         only: vec![],
+        pass_clock: None,
         warmup: 2,
         heatmap_inputs: 1,
         heatmap_frames: 1,
@@ -162,4 +163,33 @@ fn window_variants_are_scored_on_the_displayed_view() {
     // keep-size 48.23 dB.
     assert!(density.quality.sources.filled < plain.quality.sources.filled);
     assert!(density.quality.psnr > plain.quality.psnr - 0.5);
+}
+
+/// Asked for GPU timestamps, the wgpu passes are timed by them and the
+/// report says so (lavapipe offers the features; `auto` would not use
+/// them on a software rasteriser).
+#[test]
+fn pass_times_from_timestamps_are_labelled() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = config(vec![Input::Scene("builtin:crossing".into())], dir.path());
+    c.backends = vec![BackendKind::Wgpu];
+    c.only = vec!["gffe".into()];
+    c.heatmap_inputs = 0;
+    c.pass_clock = Some(framegen::PassClock::Timestamps);
+    let report = match run(&c) {
+        Ok(r) => r,
+        // A device without the features refuses, naming them.
+        Err(e) => {
+            assert!(format!("{e:#}").contains("TIMESTAMP_QUERY"), "{e:#}");
+            return;
+        }
+    };
+    let t = &report.scenes[0].rows[0].timing[0];
+    assert!(t.how.contains("timestamp"), "{}", t.how);
+    assert!(
+        t.passes.iter().any(|p| p.pass == "warp" && p.ms > 0.0),
+        "{t:?}"
+    );
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(md.contains("GPU time from timestamp queries"));
 }

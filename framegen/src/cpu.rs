@@ -40,6 +40,7 @@ fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T
     timings.push(PassTime {
         pass,
         time: start.elapsed(),
+        gpu: None,
     });
     out
 }

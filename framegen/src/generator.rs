@@ -83,6 +83,9 @@ pub struct PassTime {
     pub pass: Pass,
     /// How long it took (GPU: submit + wait, only when profiling).
     pub time: Duration,
+    /// GPU time between timestamps around the pass, when the profiled
+    /// backend uses timestamp queries (hardware adapters).
+    pub gpu: Option<Duration>,
 }
 
 /// Where a generated pixel came from.

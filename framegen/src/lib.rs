@@ -35,6 +35,7 @@ pub use generator::{
     Backend, CameraSource, FrameGenerator, Generated, IngestPlan, Job, Pass, PassTime, PixelSource,
     PushOutcome, Snapshot,
 };
+pub use gpu::timestamps::PassClock;
 pub use gpu::{GpuBackend, GpuContext};
 pub use metrics::{MetricsError, psnr, psnr_of_mse, squared_error_map, ssim, ssim_map};
 pub use settings::{Method, Settings};

@@ -89,6 +89,24 @@ fn alphas(method: Method, wanted: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// α = 1, 2, …, 8: a stalled network's eight extrapolations in a row.
+const EIGHT: [f64; 8] = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0];
+
+/// Generates at each of `wanted` (capped at 1 for interpolation) and
+/// asserts every output bounded; returns them with their α.
+fn generate_bounded(g: &mut FrameGenerator, wanted: &[f64], what: &str) -> Vec<(f64, Generated)> {
+    let method = g.settings().method;
+    alphas(method, wanted)
+        .into_iter()
+        .map(|alpha| {
+            let out = g.generate(alpha).unwrap();
+            let name = g.backend_name();
+            assert_bounded(&out, &format!("{what} {method} {name} α={alpha}"));
+            (alpha, out)
+        })
+        .collect()
+}
+
 fn frames(scene: &str) -> Vec<Frame> {
     let all = tests::render_scene(scene, SIZE, 60.0, 40..48);
     framegen::decimate::decimate(&all, 2)
@@ -104,13 +122,7 @@ fn every_hard_case_every_method_both_backends() {
                 for f in &fs {
                     g.push(f).unwrap();
                 }
-                for alpha in alphas(method, &[1e-6, 0.5, 1.0, 2.0, 3.0]) {
-                    let out = g.generate(alpha).unwrap();
-                    assert_bounded(
-                        &out,
-                        &format!("{scene} {method} {} α={alpha}", g.backend_name()),
-                    );
-                }
+                generate_bounded(&mut g, &[1e-6, 0.5, 1.0, 2.0, 3.0], scene);
             }
         }
     }
@@ -127,10 +139,7 @@ fn a_chain_of_eight_extrapolations() {
             for f in &fs {
                 g.push(f).unwrap();
             }
-            for j in 1..=8 {
-                let out = g.generate(f64::from(j)).unwrap();
-                assert_bounded(&out, &format!("{scene} {} chain {j}", g.backend_name()));
-            }
+            generate_bounded(&mut g, &EIGHT, &format!("{scene} chain"));
         }
     }
 }
@@ -154,13 +163,7 @@ fn infinite_and_near_zero_depth() {
                 for f in &poisoned {
                     g.push(f).unwrap();
                 }
-                for alpha in alphas(method, &[0.5, 3.0]) {
-                    let out = g.generate(alpha).unwrap();
-                    assert_bounded(
-                        &out,
-                        &format!("depth {depth} {method} {} α={alpha}", g.backend_name()),
-                    );
-                }
+                generate_bounded(&mut g, &[0.5, 3.0], &format!("depth {depth}"));
             }
         }
     }
@@ -205,13 +208,7 @@ fn nan_and_inf_inputs_are_sanitised_and_counted() {
                     expected * bad.len() as u64,
                     "buffer {which} {method}"
                 );
-                for alpha in alphas(method, &[0.5, 2.0]) {
-                    let out = g.generate(alpha).unwrap();
-                    assert_bounded(
-                        &out,
-                        &format!("poisoned buffer {which} {method} {}", g.backend_name()),
-                    );
-                }
+                generate_bounded(&mut g, &[0.5, 2.0], &format!("poisoned buffer {which}"));
             }
         }
     }
@@ -233,13 +230,8 @@ fn zero_time_step() {
             let mut same_time = fs[2].clone();
             same_time.meta.time = fs[1].meta.time;
             g.push(&same_time).unwrap();
-            for alpha in alphas(method, &[1e-6, 0.5, 1.0, 3.0]) {
-                let out = g.generate(alpha).unwrap();
+            for (_, out) in generate_bounded(&mut g, &[1e-6, 0.5, 1.0, 3.0], "Δt=0") {
                 assert!(out.frame.meta.time.is_finite());
-                assert_bounded(
-                    &out,
-                    &format!("Δt=0 {method} {} α={alpha}", g.backend_name()),
-                );
             }
         }
     }
@@ -278,13 +270,9 @@ fn camera_cuts() {
                     restarts,
                     "{method} flagged={flagged}: {outcome:?}"
                 );
-                for alpha in alphas(method, &[0.5, 3.0]) {
-                    let out = g.generate(alpha).unwrap();
-                    let what = format!(
-                        "cut flagged={flagged} {method} {} α={alpha}",
-                        g.backend_name()
-                    );
-                    assert_bounded(&out, &what);
+                let what = format!("cut flagged={flagged} {method} {}", g.backend_name());
+                for (alpha, out) in generate_bounded(&mut g, &[0.5, 3.0], &what) {
+                    let what = format!("{what} α={alpha}");
                     // The output shows the new shot. Measured: identical
                     // to it (∞ dB: one frame after a restart carries no
                     // motion), 7.58 dB against the old one.
@@ -422,15 +410,8 @@ fn motion_larger_than_the_frame() {
             assert_bounded(&out, &what);
             eprintln!("{what}: {psnr:.2} dB");
             assert!(psnr > 6.0, "{what}: {psnr:.2} dB");
-            // Eight more extrapolations out to α = 8 (or interp's 1).
-            for j in 1..=8 {
-                let alpha = if method == Method::Interp {
-                    1.0
-                } else {
-                    f64::from(j)
-                };
-                assert_bounded(&g.generate(alpha).unwrap(), &format!("{what} α={alpha}"));
-            }
+            // Eight more extrapolations out to α = 8 (interp: capped at 1).
+            generate_bounded(&mut g, &EIGHT, &what);
         }
     }
 }
@@ -457,10 +438,8 @@ fn half_turn_within_one_frame() {
                 g.push(f).unwrap();
             }
             g.push(&turned).unwrap();
-            for alpha in alphas(method, &[1e-6, 0.5, 1.0, 3.0]) {
-                let out = g.generate(alpha).unwrap();
-                let what = format!("half turn {method} {} α={alpha}", g.backend_name());
-                assert_bounded(&out, &what);
+            for (alpha, out) in generate_bounded(&mut g, &[1e-6, 0.5, 1.0, 3.0], "half turn") {
+                let what = format!("half turn {method} α={alpha}");
                 let cam = out.frame.meta.camera;
                 assert!(cam.pose.position.is_finite(), "{what}");
                 assert!(
@@ -518,9 +497,7 @@ fn tiny_and_extreme_aspect_frames() {
                 } else {
                     assert!(psnr > 5.0, "{what}: {psnr:.2} dB");
                 }
-                for alpha in alphas(method, &[1e-6, 1.0, 3.0]) {
-                    assert_bounded(&g.generate(alpha).unwrap(), &format!("{what} α={alpha}"));
-                }
+                generate_bounded(&mut g, &[1e-6, 1.0, 3.0], &what);
             }
         }
     }

@@ -82,6 +82,9 @@ pub struct EvalConfig {
     pub backends: Vec<BackendKind>,
     /// Extra resolutions for the first (rendered) input.
     pub resolutions: Vec<FrameSize>,
+    /// How wgpu passes are timed: `None` = [`framegen::PassClock::preferred`]
+    /// (timestamps on hardware, wall time on software rasterisers).
+    pub pass_clock: Option<framegen::PassClock>,
     /// Keep only variants whose label contains one of these (all if empty).
     pub only: Vec<String>,
     /// Fed frames before scoring starts (history and background warm up).
@@ -261,10 +264,14 @@ fn run_group(
                 .iter()
                 .map(|&b| {
                     let g = match (b, ctx) {
-                        (BackendKind::Wgpu, Some(ctx)) => FrameGenerator::with_backend(
-                            v.settings,
-                            Box::new(GpuBackend::profiled(ctx.clone())),
-                        ),
+                        (BackendKind::Wgpu, Some(ctx)) => {
+                            let backend = match config.pass_clock {
+                                None => GpuBackend::profiled(ctx.clone()),
+                                Some(clock) => GpuBackend::profiled_with(ctx.clone(), clock)
+                                    .map_err(|(_, e)| e)?,
+                            };
+                            FrameGenerator::with_backend(v.settings, Box::new(backend))
+                        }
                         _ => FrameGenerator::cpu(v.settings),
                     }?;
                     Ok((b, g))

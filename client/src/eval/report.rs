@@ -240,7 +240,7 @@ impl Report {
 
     /// Writes `report.json` and `report.md` into `dir`.
     pub fn write(&self, dir: &Path) -> anyhow::Result<()> {
-        std::fs::write(dir.join("report.json"), serde_json::to_vec_pretty(self)?)?;
+        std::fs::write(dir.join("report.json"), serde_json::to_vec(self)?)?;
         std::fs::write(dir.join("report.md"), self.markdown())?;
         Ok(())
     }
@@ -272,7 +272,14 @@ impl Report {
             "Times are ms per generated frame: (push + n generations) / n, the median over the sequence.\n"
         );
         for b in &self.backends {
-            let _ = writeln!(md, "* `{}`: {}.", b.name(), super::timing::method_of(*b));
+            let how = self
+                .scenes
+                .iter()
+                .flat_map(|s| &s.rows)
+                .flat_map(|r| &r.timing)
+                .find(|t| t.backend == *b)
+                .map_or("not measured", |t| t.how);
+            let _ = writeln!(md, "* `{}`: {how}.", b.name());
         }
         let _ = writeln!(
             md,

@@ -1,11 +1,14 @@
 //! What each variant costs: wall time of push (ingest) and of each
 //! generated frame, per pass, and the bandwidth floor to compare with.
 //!
-//! The wgpu backend runs profiled: one submission per pass, waited for, so
-//! each pass's time is its submit + wait wall time. That is what lavapipe
-//! can report honestly (its timestamp queries read near zero for real work,
-//! see DEVELOPERS.md), at the price of one synchronisation per pass, which
-//! the totals include. The CPU reference is single-threaded wall time.
+//! The wgpu backend runs profiled: one submission per pass, waited for.
+//! On a hardware adapter with timestamp queries each pass's time is the
+//! GPU time between timestamps around it ([`framegen::PassClock`]); on a
+//! software rasteriser such as lavapipe, whose timestamps read near zero
+//! for real work (DEVELOPERS.md), it is the submit + wait wall time. The
+//! report labels which. Totals (push, generate) are always wall time and
+//! include one synchronisation per pass. The CPU reference is
+//! single-threaded wall time.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -17,10 +20,15 @@ use serde::Serialize;
 use super::BackendKind;
 
 /// How the numbers of a backend were taken.
-pub fn method_of(backend: BackendKind) -> &'static str {
-    match backend {
-        BackendKind::Cpu => "wall time, single-threaded CPU reference",
-        BackendKind::Wgpu => "wall time of submit + wait per pass (profiled; no timestamp queries)",
+pub fn method_of(backend: BackendKind, timestamps: bool) -> &'static str {
+    match (backend, timestamps) {
+        (BackendKind::Cpu, _) => "wall time, single-threaded CPU reference",
+        (BackendKind::Wgpu, false) => {
+            "per pass: wall time of submit + wait (profiled; the adapter's timestamps are not used); totals: wall time"
+        }
+        (BackendKind::Wgpu, true) => {
+            "per pass: GPU time from timestamp queries around each pass; totals: wall time of the profiled run"
+        }
     }
 }
 
@@ -32,6 +40,7 @@ pub struct TimingAcc {
     per_generated: Vec<f64>,
     passes: BTreeMap<&'static str, f64>,
     intervals: usize,
+    timestamps: bool,
 }
 
 impl TimingAcc {
@@ -44,6 +53,7 @@ impl TimingAcc {
             per_generated: Vec::new(),
             passes: BTreeMap::new(),
             intervals: 0,
+            timestamps: false,
         }
     }
 
@@ -57,7 +67,8 @@ impl TimingAcc {
         self.per_generated
             .push(total / generated.len().max(1) as f64);
         for p in passes {
-            *self.passes.entry(p.pass.name()).or_default() += ms(p.time);
+            self.timestamps |= p.gpu.is_some();
+            *self.passes.entry(p.pass.name()).or_default() += ms(p.gpu.unwrap_or(p.time));
         }
         self.intervals += 1;
     }
@@ -67,7 +78,7 @@ impl TimingAcc {
         let n = self.intervals.max(1) as f64;
         Timing {
             backend: self.backend,
-            how: method_of(self.backend),
+            how: method_of(self.backend, self.timestamps),
             push_ms: median(&self.push),
             generate_ms: median(&self.generate),
             per_generated_ms: median(&self.per_generated),

@@ -18,6 +18,7 @@ use crate::gffe::motion::GpuMotion;
 use crate::gffe::warp::{GpuOutput, GpuWarp};
 use crate::gffe::window::{Crop, GpuCrop};
 use crate::gpu::GpuContext;
+use crate::gpu::timestamps::{PassClock, Timestamps};
 use crate::input::Prepared;
 use crate::interp::reproject::GpuReproject;
 use crate::interp::resolve::{GpuImage, GpuResolve};
@@ -109,6 +110,7 @@ fn ensure<'a>(
 struct Recorder<'a> {
     ctx: &'a GpuContext,
     profile: bool,
+    timestamps: Option<&'a Timestamps>,
     encoder: Option<wgpu::CommandEncoder>,
     timings: &'a mut Vec<PassTime>,
 }
@@ -123,13 +125,19 @@ impl Recorder<'_> {
         let encoder = self
             .encoder
             .get_or_insert_with(|| self.ctx.device.create_command_encoder(&Default::default()));
+        let timestamps = self.timestamps.filter(|_| self.profile);
+        if let Some(ts) = timestamps {
+            ts.begin(encoder);
+        }
         f(encoder);
+        if let Some(ts) = timestamps {
+            ts.end(encoder);
+        }
         if self.profile {
             self.flush()?;
-            self.timings.push(PassTime {
-                pass,
-                time: start.elapsed(),
-            });
+            let time = start.elapsed();
+            let gpu = timestamps.map(|ts| ts.read(self.ctx)).transpose()?;
+            self.timings.push(PassTime { pass, time, gpu });
         }
         Ok(())
     }
@@ -162,6 +170,8 @@ pub struct GpuBackend {
     spare: Option<FrameBuffers>,
     scratch: Scratch,
     profile: bool,
+    /// Timestamp queries for profiled passes (hardware adapters).
+    timestamps: Option<Timestamps>,
     timings: Vec<PassTime>,
 }
 
@@ -188,16 +198,43 @@ impl GpuBackend {
             spare: None,
             scratch: Scratch::default(),
             profile: false,
+            timestamps: None,
             timings: Vec::new(),
         }
     }
 
     /// A backend that submits and waits after every pass and records its
-    /// wall time.
+    /// wall time, and its GPU time from timestamp queries where the adapter
+    /// is real hardware with the features ([`PassClock::preferred`]).
     pub fn profiled(ctx: Arc<GpuContext>) -> Self {
+        let clock = PassClock::preferred(&ctx);
+        Self::profiled_with(ctx, clock).unwrap_or_else(|(b, _)| b)
+    }
+
+    /// A profiled backend on the given clock. Asking for timestamps on a
+    /// device without the features returns the wall-time backend with the
+    /// reason.
+    #[allow(clippy::result_large_err)] // the backend is handed back, not lost
+    pub fn profiled_with(
+        ctx: Arc<GpuContext>,
+        clock: PassClock,
+    ) -> Result<Self, (Self, FramegenError)> {
         let mut b = Self::new(ctx);
         b.profile = true;
-        b
+        if clock == PassClock::Timestamps {
+            match Timestamps::new(&b.ctx) {
+                Some(ts) => b.timestamps = Some(ts),
+                None => {
+                    let why = FramegenError::Device(format!(
+                        "{} lacks {:?}",
+                        b.ctx.adapter_info.name,
+                        super::timestamps::FEATURES
+                    ));
+                    return Err((b, why));
+                }
+            }
+        }
+        Ok(b)
     }
 
     fn read_output(&self, n: u32) -> Result<Output, FramegenError> {
@@ -248,6 +285,7 @@ impl Backend for GpuBackend {
             self.timings.push(PassTime {
                 pass: Pass::Upload,
                 time: start.elapsed(),
+                gpu: None,
             });
         }
         let prev = match plan.prev {
@@ -284,6 +322,7 @@ impl Backend for GpuBackend {
         let mut rec = Recorder {
             ctx,
             profile: self.profile,
+            timestamps: self.timestamps.as_ref(),
             encoder: None,
             timings: &mut self.timings,
         };
@@ -398,6 +437,7 @@ impl Backend for GpuBackend {
         let mut rec = Recorder {
             ctx,
             profile: self.profile,
+            timestamps: self.timestamps.as_ref(),
             encoder: None,
             timings: &mut self.timings,
         };
@@ -574,6 +614,7 @@ impl Backend for GpuBackend {
             self.timings.push(PassTime {
                 pass: Pass::Readback,
                 time: start.elapsed(),
+                gpu: None,
             });
         }
         Ok(output)

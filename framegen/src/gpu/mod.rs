@@ -20,6 +20,7 @@ pub const WORKGROUP: u32 = 256;
 const MAX_GROUPS_X: u32 = 32768;
 
 mod backend;
+pub mod timestamps;
 pub use backend::GpuBackend;
 
 /// The WGSL every pass shader is prefixed with (see `common.wgsl`).
@@ -72,7 +73,8 @@ impl GpuContext {
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("framegen"),
-            required_features: wgpu::Features::empty(),
+            // Timestamp queries where offered (profiling on hardware).
+            required_features: adapter.features() & timestamps::FEATURES,
             required_limits: limits,
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
