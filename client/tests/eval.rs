@@ -56,6 +56,8 @@ fn methods_on_a_scene_and_on_its_dump() {
     // Files.
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("## crossing") && md.contains("★"), "{md}");
+    // Per-pass times also in copies of the inputs (the bandwidth floor).
+    assert!(md.contains("warp") && md.contains("×)"), "{md}");
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(json["scenes"].as_array().unwrap().len(), 2);

@@ -471,18 +471,33 @@ impl Report {
                     .map_or("—".into(), |p| format!("{p:.1}"))
             );
         }
-        // Per-pass breakdown of the methods at their defaults.
+        // Per-pass breakdown of the methods at their defaults, in ms and
+        // in copies of the inputs (the bandwidth floor of that backend).
         let _ = writeln!(
             md,
-            "\nPer pass, ms per rendered frame (push + its n generations), methods at their defaults:\n"
+            "\nPer pass, ms per rendered frame (push + its n generations) and, in brackets, that time in \
+             copies of the frame's inputs on the same backend (the bandwidth floor above); methods at \
+             their defaults:\n"
         );
         for &b in &self.backends {
             for r in scene.rows.iter().filter(|r| r.axis == Axis::Method) {
+                let floor = self
+                    .copy_floor
+                    .iter()
+                    .find(|c| c.size == r.size)
+                    .and_then(|c| match b {
+                        BackendKind::Cpu => Some(c.cpu_ms),
+                        BackendKind::Wgpu => c.wgpu_ms,
+                    })
+                    .filter(|&f| f > 0.0);
                 if let Some(t) = r.timing.iter().find(|t| t.backend == b) {
                     let passes: Vec<String> = t
                         .passes
                         .iter()
-                        .map(|p| format!("{} {:.2}", p.pass, p.ms))
+                        .map(|p| match floor {
+                            Some(f) => format!("{} {:.2} ({:.0}×)", p.pass, p.ms, p.ms / f),
+                            None => format!("{} {:.2}", p.pass, p.ms),
+                        })
                         .collect();
                     let _ = writeln!(md, "* {} `{}`: {}", b.name(), r.label, passes.join(", "));
                 }
