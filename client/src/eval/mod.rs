@@ -297,7 +297,10 @@ fn run_group(
         }
         // ring holds sequence positions r + 1 − len ..= r.
         let at = |k: usize| &ring[ring.len() - 1 - (r - k)];
+        // Shared by the variants of this step: the fed frame per step size,
+        // the display-encoded truth per position.
         let mut kept: HashMap<usize, Arc<Frame>> = HashMap::new();
+        let mut truths: HashMap<usize, Arc<protocol::display::DisplayImage>> = HashMap::new();
         for run in &mut runs {
             let s = run.variant.step();
             if (r + 1) % s != 0 {
@@ -357,7 +360,15 @@ fn run_group(
                     framegen::display_encode(size.width, size.height, &f.color)
                         .context("display encode")
                 };
-                let (test, truth_image) = (encode(&g.frame)?, encode(truth)?);
+                let test = encode(&g.frame)?;
+                let truth_image = match truths.get(&truth_pos) {
+                    Some(t) => t.clone(),
+                    None => {
+                        let t = Arc::new(encode(truth)?);
+                        truths.insert(truth_pos, t.clone());
+                        t
+                    }
+                };
                 let regions = measure::regions(g, truth);
                 let sc = score(&test, &truth_image, &regions)?;
                 run.quality.add(&sc, g);
@@ -373,7 +384,7 @@ fn run_group(
                     heat.entry(truth_pos).or_default().push(heatmap::Capture {
                         label: run.variant.label.clone(),
                         test,
-                        truth: truth_image,
+                        truth: (*truth_image).clone(),
                         flip: sc.flip_map,
                         flip_mean: sc.flip,
                     });

@@ -13,6 +13,7 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
+use framegen::accounting::Percentiles;
 use framegen::{GpuContext, PassTime};
 use protocol::FrameSize;
 use serde::Serialize;
@@ -82,7 +83,7 @@ impl TimingAcc {
             push_ms: median(&self.push),
             generate_ms: median(&self.generate),
             per_generated_ms: median(&self.per_generated),
-            per_generated_p95_ms: percentile(&self.per_generated, 0.95),
+            per_generated_p95_ms: Percentiles::of(self.per_generated.clone()).p95,
             passes: self
                 .passes
                 .iter()
@@ -125,20 +126,10 @@ pub struct PassMs {
     pub ms: f64,
 }
 
-/// Median; 0 for no samples.
+/// Median (nearest rank, as every percentile in the project:
+/// [`Percentiles`]); 0 for no samples.
 pub fn median(v: &[f64]) -> f64 {
-    percentile(v, 0.5)
-}
-
-/// Nearest-rank percentile; 0 for no samples.
-pub fn percentile(v: &[f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let rank = ((q * s.len() as f64).ceil() as usize).clamp(1, s.len());
-    s[rank - 1]
+    Percentiles::of(v.to_vec()).p50
 }
 
 /// The bandwidth reference at one size: copying the bytes a rendered
@@ -203,11 +194,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn percentiles_are_nearest_rank() {
-        let v = [5.0, 1.0, 4.0, 2.0, 3.0];
-        assert_eq!(median(&v), 3.0);
-        assert_eq!(percentile(&v, 0.95), 5.0);
-        assert_eq!(percentile(&v, 0.0), 1.0);
+    fn medians_are_nearest_rank() {
+        assert_eq!(median(&[5.0, 1.0, 4.0, 2.0, 3.0]), 3.0);
         assert_eq!(median(&[]), 0.0);
     }
 
