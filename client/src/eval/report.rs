@@ -28,7 +28,7 @@ pub struct Report {
     pub created_unix: u64,
     /// The machine.
     pub machine: Machine,
-    /// The run's parameters.
+    /// Frames per sequence at the display rate.
     pub frames: u64,
     /// First frame.
     pub start: u64,
@@ -202,7 +202,6 @@ impl Report {
         for scene in &mut self.scenes {
             let mut keys: Vec<(String, u32)> =
                 scene.rows.iter().map(|r| (r.size.clone(), r.n)).collect();
-            keys.dedup();
             keys.sort();
             keys.dedup();
             for (size, n) in keys {
