@@ -48,17 +48,17 @@ pub fn start_local(scene: &str, size: FrameSize, fps: f64) -> anyhow::Result<Loc
 }
 
 /// Starts a server on 127.0.0.1 replaying the dump in `dir` (looped, as one
-/// live stream) at its own size and rate.
+/// live stream) at its own size and rate: a native dump, a Blender render or
+/// an Unreal capture.
 pub fn start_local_dump(dir: &std::path::Path) -> anyhow::Result<LocalServer> {
-    let manifest = protocol::dump::DumpReader::open(dir)?.manifest().clone();
-    let size = FrameSize::new(manifest.width, manifest.height);
+    let dump = protocol::import::AnyDump::open(dir)?;
     start_local_from(
         SourceSpec::Dump {
             dir: dir.to_path_buf(),
             looped: true,
         },
-        size,
-        manifest.fps,
+        dump.size(),
+        dump.fps(),
     )
 }
 

@@ -7,6 +7,7 @@
 //! * [`wire`]: versioned, length-prefixed messages (bincode 2) and a sans-IO
 //!   decoder; [`assemble`] turns one frame's messages back into a frame.
 //! * [`dump`]: the on-disk dump format (OpenEXR + JSON).
+//! * [`import`]: Blender and Unreal dumps converted into the conventions.
 //! * [`display`]: the one fixed display transform (exposure 1, Reinhard,
 //!   sRGB) that presenters, PNG output and quality metrics all use.
 //!
@@ -32,6 +33,7 @@ pub mod codec;
 pub mod display;
 pub mod dump;
 pub mod frame;
+pub mod import;
 pub mod wire;
 
 pub use camera::{Camera, Pose, Projected, Projection, Window, WorldPoint};

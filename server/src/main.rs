@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use protocol::FrameSize;
 use protocol::dump::{DumpWriter, Manifest};
+use protocol::import::{AnyDump, Format};
 use protocol::wire::WindowMode;
 use server::render::{Renderer, WindowSettings, plan};
 use server::scene::{Scene, builtin};
@@ -100,6 +101,29 @@ enum Command {
         /// The dump directory (holding manifest.json).
         dir: PathBuf,
     },
+    /// Convert a Blender render or an Unreal capture into a dump, checking
+    /// its motion vectors against depth + camera.
+    Import {
+        /// The source directory (holding cameras.json).
+        src: PathBuf,
+        /// Output directory (must not hold a dump yet).
+        #[arg(long, short)]
+        out: PathBuf,
+        /// What the source is; `auto` tells it from the sidecar.
+        #[arg(long, value_enum, default_value_t = ImportFormat::Auto)]
+        format: ImportFormat,
+    },
+}
+
+/// `server import --format`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum ImportFormat {
+    /// From cameras.json's `format`.
+    Auto,
+    /// A Blender render with the framegen_export.py sidecar.
+    Blender,
+    /// An Unreal folder-per-buffer capture.
+    Unreal,
 }
 
 fn parse_codec(s: &str) -> Result<protocol::Codec, String> {
@@ -152,9 +176,9 @@ fn main() -> anyhow::Result<()> {
         } => {
             let (source, size, fps) = match dump {
                 Some(dir) => {
-                    let reader = protocol::dump::DumpReader::open(&dir)?;
-                    let m = reader.manifest();
-                    let (size, fps) = (m.size(), m.fps);
+                    // Native dumps, Blender renders and Unreal captures alike.
+                    let dump = AnyDump::open(&dir)?;
+                    let (size, fps) = (dump.size(), dump.fps());
                     (SourceSpec::Dump { dir, looped }, size, fps)
                 }
                 None => (
@@ -185,6 +209,7 @@ fn main() -> anyhow::Result<()> {
             }))
         }
         Command::Inspect { dir } => inspect(&dir),
+        Command::Import { src, out, format } => import(&src, &out, format),
     }
 }
 
@@ -455,5 +480,62 @@ fn inspect(dir: &Path) -> anyhow::Result<()> {
     }
     anyhow::ensure!(report.is_clean(), "the dump has problems (see above)");
     println!("ok");
+    Ok(())
+}
+
+fn import(src: &Path, out: &Path, format: ImportFormat) -> anyhow::Result<()> {
+    let format = match format {
+        ImportFormat::Auto => Format::detect(src)?,
+        ImportFormat::Blender => Format::Blender,
+        ImportFormat::Unreal => Format::Unreal,
+    };
+    let dump = AnyDump::open_as(src, format)
+        .with_context(|| format!("opening {} as {}", src.display(), format.name()))?;
+    println!(
+        "{}: {} frames, {}x{} at {} fps",
+        dump.describe(),
+        dump.len(),
+        dump.size().width,
+        dump.size().height,
+        dump.fps()
+    );
+    let bar = progress(dump.len(), "frames");
+    let report = protocol::import::import(&dump, out, |i| bar.set_position(i))?;
+    bar.finish_and_clear();
+    println!(
+        "wrote {} of {} frames to {}",
+        report.written,
+        report.source_frames,
+        out.display()
+    );
+    for p in &report.problems {
+        let what = if p.skipped { "skipped" } else { "kept" };
+        println!("frame {} ({what}): {}", p.position, p.detail);
+    }
+    let r = &report.reprojection;
+    if r.pixels == 0 {
+        println!("motion check: no pixel to check (one frame, or every pixel masked)");
+    } else {
+        println!(
+            "motion vs depth + camera: mean {:.4} px, median {:.4} px, {:.1} % within 1 px \
+             ({} pixels in {} frames)",
+            r.mean_px,
+            r.median_px,
+            100.0 * r.within_1px,
+            r.pixels,
+            r.frames
+        );
+        for a in &r.alternatives {
+            println!(
+                "  if {}: mean {:.4} px, median {:.4} px",
+                a.hypothesis.describe(),
+                a.mean_px,
+                a.median_px
+            );
+        }
+    }
+    for w in &r.warnings {
+        eprintln!("WARNING: {w}");
+    }
     Ok(())
 }

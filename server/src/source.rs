@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use protocol::assemble::encode_frame;
-use protocol::dump::DumpReader;
+use protocol::import::AnyDump;
 use protocol::wire::StreamBuffer;
 use protocol::{Frame, FrameSize};
 use tokio::sync::broadcast;
@@ -49,7 +49,8 @@ pub enum SourceSpec {
         /// Directory for relative glTF paths.
         base: PathBuf,
     },
-    /// Replay a dump at its own rate.
+    /// Replay a dump at its own rate: a native dump, a Blender render or an
+    /// Unreal capture ([`protocol::import::AnyDump`]).
     Dump {
         /// The dump directory.
         dir: PathBuf,
@@ -164,7 +165,7 @@ impl Drop for Source {
 
 enum Producer {
     Scene { renderer: Box<Renderer>, fps: f64 },
-    Dump { reader: DumpReader, looped: bool },
+    Dump { reader: Box<AnyDump>, looped: bool },
 }
 
 impl Producer {
@@ -186,7 +187,8 @@ impl Producer {
                 }
             }
             SourceSpec::Dump { dir, looped } => {
-                let reader = DumpReader::open(dir)?;
+                // A native dump, a Blender render or an Unreal capture.
+                let reader = Box::new(AnyDump::open(dir)?);
                 anyhow::ensure!(!reader.is_empty(), "the dump has no frames");
                 Producer::Dump {
                     reader,
@@ -200,11 +202,14 @@ impl Producer {
     fn times(&self, k: u64) -> anyhow::Result<(f64, Option<f64>)> {
         Ok(match self {
             Producer::Scene { fps, .. } => (k as f64 / fps, Some((k + 1) as f64 / fps)),
-            Producer::Dump { reader, .. } => {
+            Producer::Dump { reader, looped } => {
                 let n = reader.len();
-                let t = reader.read_meta(k % n)?.time;
+                let offset = Self::loop_offset(reader, *looped, k)?;
+                let t = reader.read_meta(k % n)?.time + offset;
                 let next = if k % n + 1 < n {
-                    Some(reader.read_meta(k % n + 1)?.time)
+                    Some(reader.read_meta(k % n + 1)?.time + offset)
+                } else if *looped {
+                    Some(reader.read_meta(0)?.time + Self::loop_offset(reader, true, k + 1)?)
                 } else {
                     None
                 };
@@ -217,15 +222,31 @@ impl Producer {
         Ok(match self {
             Producer::Scene { renderer, fps } => renderer.render(k, *fps)?,
             Producer::Dump { reader, looped } => {
-                let mut f = reader.read_frame(k % reader.len())?;
+                let n = reader.len();
+                let mut f = reader.read_frame(k % n)?;
                 if *looped {
-                    // Indices keep increasing across loops, so clients do
-                    // not take the second loop for late frames.
+                    // Indices and times keep increasing across loops, so
+                    // clients do not take the second loop for late frames
+                    // and the pacer keeps the dump's rate; the jump back to
+                    // the first frame is a cut.
                     f.meta.index = k;
+                    f.meta.time += Self::loop_offset(reader, true, k)?;
+                    f.meta.cut |= k >= n && k % n == 0;
                 }
                 f
             }
         })
+    }
+
+    /// How far in time loop number `k / len` of a looped dump is shifted:
+    /// whole loops of (first → last frame + one frame interval).
+    fn loop_offset(reader: &AnyDump, looped: bool, k: u64) -> anyhow::Result<f64> {
+        let n = reader.len();
+        if !looped || k < n {
+            return Ok(0.0);
+        }
+        let span = reader.read_meta(n - 1)?.time - reader.read_meta(0)?.time;
+        Ok((k / n) as f64 * (span + 1.0 / reader.fps()))
     }
 
     fn finished(&self, k: u64) -> bool {
@@ -286,5 +307,40 @@ impl Producer {
             k += 1;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+
+    /// A looped replay keeps time and indices increasing at the dump's rate
+    /// across the jump back, and flags the jump as a cut. The dump is the
+    /// Blender fixture (10 frames, 30 fps), read through the importer.
+    #[test]
+    fn a_looped_dump_keeps_time_running_and_cuts_at_the_seam() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/blender");
+        let spec = SourceSpec::Dump { dir, looped: true };
+        let mut producer = Producer::open(&spec).unwrap();
+        let mut last: Option<f64> = None;
+        for k in 0..25 {
+            let (t, next) = producer.times(k).unwrap();
+            let next = next.expect("a looped dump never ends");
+            assert!(
+                (next - t - 1.0 / 30.0).abs() < 1e-9,
+                "frame {k}: {t} → {next}"
+            );
+            if let Some(prev) = last {
+                assert!((t - prev - 1.0 / 30.0).abs() < 1e-9, "frame {k}");
+            }
+            last = Some(t);
+            let f = producer.frame(k).unwrap();
+            assert_eq!(f.meta.index, k);
+            assert!((f.meta.time - t).abs() < 1e-9);
+            assert_eq!(f.meta.cut, k == 10 || k == 20, "frame {k}");
+        }
+        assert!(!producer.finished(1000));
     }
 }

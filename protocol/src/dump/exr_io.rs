@@ -46,42 +46,36 @@ pub const PANIC_DETAIL: &str = "decoder panicked on this file";
 /// The channel list type `exr` wants.
 type SmallChannels = SmallVec<[AnyChannel<FlatSamples>; 4]>;
 
-/// Writes the pixel buffers of `frame` to `path`.
-pub fn write_exr(path: &Path, frame: &Frame) -> Result<(), DumpError> {
-    let n = frame.meta.size.pixels() as usize;
-    let mut channels = SmallChannels::new();
-    let half_plane = |get: &dyn Fn(usize) -> Half| FlatSamples::F16((0..n).map(get).collect());
-    let f32_plane = |get: &dyn Fn(usize) -> f32| FlatSamples::F32((0..n).map(get).collect());
-    for (c, name) in channel_names(BufferKind::Color).iter().enumerate() {
-        channels.push(AnyChannel::new(*name, half_plane(&|i| frame.color[i][c])));
-    }
-    channels.push(AnyChannel::new("Z", f32_plane(&|i| frame.depth[i])));
-    for (c, name) in channel_names(BufferKind::Motion).iter().enumerate() {
-        channels.push(AnyChannel::new(*name, f32_plane(&|i| frame.motion[i][c])));
-    }
-    for extra in &frame.extras {
-        let names = channel_names(extra.kind);
-        if extra.kind == BufferKind::Mask {
-            let plane = half_plane(&|i| Half::from_f32(f32::from(extra.data[i]) / 255.0));
-            channels.push(AnyChannel::new(names[0], plane));
-            continue;
-        }
-        // Normal and albedo are held as RGB(A) f16; write the first 3 channels.
-        let stride = extra.kind.canonical_format().channels() as usize;
-        for (c, name) in names.iter().enumerate() {
-            let plane = half_plane(&|i| {
-                let o = (i * stride + c) * 2;
-                Half::from_le_bytes([extra.data[o], extra.data[o + 1]])
-            });
-            channels.push(AnyChannel::new(*name, plane));
-        }
-    }
-    let size = (
-        frame.meta.size.width as usize,
-        frame.meta.size.height as usize,
-    );
+/// One channel to write: its name, its samples and whether to store them as
+/// half floats (colour-like data) or full floats (depth, motion).
+pub(crate) struct PlaneOut<'a> {
+    /// Channel name.
+    pub name: &'a str,
+    /// One value per pixel, row by row from the top.
+    pub values: Vec<f32>,
+    /// Store as `f16`.
+    pub half: bool,
+}
+
+/// Writes channels of `size` pixels to `path` as one scan-line ZIP layer.
+pub(crate) fn write_planes(
+    path: &Path,
+    size: FrameSize,
+    planes: Vec<PlaneOut<'_>>,
+) -> Result<(), DumpError> {
+    let channels: SmallChannels = planes
+        .into_iter()
+        .map(|p| {
+            let samples = if p.half {
+                FlatSamples::F16(p.values.into_iter().map(Half::from_f32).collect())
+            } else {
+                FlatSamples::F32(p.values)
+            };
+            AnyChannel::new(p.name, samples)
+        })
+        .collect();
     let layer = Layer::new(
-        size,
+        (size.width as usize, size.height as usize),
         LayerAttributes::default(),
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
@@ -92,13 +86,77 @@ pub fn write_exr(path: &Path, frame: &Frame) -> Result<(), DumpError> {
         .map_err(|e| DumpError::exr(path, e))
 }
 
-/// Reads the pixels of one frame from `path` into `frame`, whose metadata is
-/// already known. The header is checked (size, channels) before any pixel is
-/// decoded.
-pub fn read_exr(path: &Path, frame: &mut Frame) -> Result<(), DumpError> {
-    let size = frame.meta.size;
+/// Writes the pixel buffers of `frame` to `path`.
+pub fn write_exr(path: &Path, frame: &Frame) -> Result<(), DumpError> {
+    let n = frame.meta.size.pixels() as usize;
+    let mut planes = Vec::new();
+    let mut add = |name, half, get: &dyn Fn(usize) -> f32| {
+        planes.push(PlaneOut {
+            name,
+            values: (0..n).map(get).collect(),
+            half,
+        });
+    };
+    for (c, name) in channel_names(BufferKind::Color).iter().enumerate() {
+        add(name, true, &|i| frame.color[i][c].to_f32());
+    }
+    add("Z", false, &|i| frame.depth[i]);
+    for (c, name) in channel_names(BufferKind::Motion).iter().enumerate() {
+        add(name, false, &|i| frame.motion[i][c]);
+    }
+    for extra in &frame.extras {
+        let names = channel_names(extra.kind);
+        if extra.kind == BufferKind::Mask {
+            add(names[0], true, &|i| f32::from(extra.data[i]) / 255.0);
+            continue;
+        }
+        // Normal and albedo are held as RGB(A) f16; write the first 3 channels.
+        let stride = extra.kind.canonical_format().channels() as usize;
+        for (c, name) in names.iter().enumerate() {
+            add(name, true, &|i| {
+                let o = (i * stride + c) * 2;
+                Half::from_le_bytes([extra.data[o], extra.data[o + 1]]).to_f32()
+            });
+        }
+    }
+    write_planes(path, frame.meta.size, planes)
+}
+
+/// The channels of one EXR file as `f32` planes, by name.
+pub(crate) struct ExrPlanes {
+    path: std::path::PathBuf,
+    planes: Vec<(String, Vec<f32>)>,
+}
+
+impl ExrPlanes {
+    /// The plane called `name`, if the file has it.
+    pub fn get(&self, name: &str) -> Option<&[f32]> {
+        self.planes
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.as_slice())
+    }
+
+    /// The plane called `name`, or a [`DumpError::MissingChannel`].
+    pub fn require(&self, name: &str) -> Result<&[f32], DumpError> {
+        self.get(name).ok_or_else(|| DumpError::MissingChannel {
+            path: self.path.clone(),
+            channel: name.to_owned(),
+        })
+    }
+}
+
+/// Reads every channel of the first layer of `path` as `f32`. The header is
+/// checked first: the layer must be `size` and hold every `required` channel
+/// before any pixel is decoded, so a wrong or hostile file costs no
+/// allocation of its claimed size.
+pub(crate) fn read_planes(
+    path: &Path,
+    size: FrameSize,
+    required: &[&str],
+) -> Result<ExrPlanes, DumpError> {
     // Opening first turns a missing file into an I/O "not found" error that
-    // the reader reports as a missing frame.
+    // readers report as a missing frame.
     std::fs::File::open(path).map_err(|source| DumpError::Io {
         path: path.to_owned(),
         source,
@@ -113,32 +171,28 @@ pub fn read_exr(path: &Path, frame: &mut Frame) -> Result<(), DumpError> {
         .headers
         .first()
         .ok_or_else(|| DumpError::exr_msg(path, "no layer in file"))?;
-    let got = FrameSize::new(header.layer_size.0 as u32, header.layer_size.1 as u32);
+    let mismatch = |got: (usize, usize)| DumpError::SizeMismatch {
+        path: path.to_owned(),
+        expected: size,
+        got: FrameSize::new(got.0 as u32, got.1 as u32),
+    };
     if header.layer_size.0 != size.width as usize || header.layer_size.1 != size.height as usize {
-        return Err(DumpError::SizeMismatch {
-            path: path.to_owned(),
-            expected: size,
-            got,
-        });
+        return Err(mismatch(header.layer_size.into()));
     }
     if header.deep {
         return Err(DumpError::exr_msg(path, "deep data is not a frame"));
     }
-    let has = |name: &str| {
-        header
+    for name in required {
+        if !header
             .channels
             .list
             .iter()
-            .any(|c| c.name.to_string() == name)
-    };
-    for kind in BufferKind::REQUIRED {
-        for name in channel_names(kind) {
-            if !has(name) {
-                return Err(DumpError::MissingChannel {
-                    path: path.to_owned(),
-                    channel: (*name).to_owned(),
-                });
-            }
+            .any(|c| c.name.to_string() == *name)
+        {
+            return Err(DumpError::MissingChannel {
+                path: path.to_owned(),
+                channel: (*name).to_owned(),
+            });
         }
     }
 
@@ -153,67 +207,61 @@ pub fn read_exr(path: &Path, frame: &mut Frame) -> Result<(), DumpError> {
     })
     .map_err(|_| DumpError::exr_msg(path, PANIC_DETAIL))?
     .map_err(|e| DumpError::exr(path, e))?;
-    let layer = &read.layer_data;
+    let layer = read.layer_data;
     if layer.size.0 != size.width as usize || layer.size.1 != size.height as usize {
-        return Err(DumpError::SizeMismatch {
-            path: path.to_owned(),
-            expected: size,
-            got: FrameSize::new(layer.size.0 as u32, layer.size.1 as u32),
-        });
+        return Err(mismatch(layer.size.into()));
     }
     let n = size.pixels() as usize;
-    let find = |name: &str| -> Option<&FlatSamples> {
-        layer
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name.to_string() == name)
-            .map(|c| &c.sample_data)
-            .filter(|s| s.len() == n)
-    };
-    let plane = |name: &str| -> Result<Vec<f32>, DumpError> {
-        find(name)
-            .map(|s| s.values_as_f32().collect())
-            .ok_or_else(|| DumpError::MissingChannel {
-                path: path.to_owned(),
-                channel: name.to_owned(),
-            })
-    };
-    let [r, g, b] = [plane("R")?, plane("G")?, plane("B")?];
-    frame.color = (0..n)
-        .map(|i| {
-            [
-                Half::from_f32(r[i]),
-                Half::from_f32(g[i]),
-                Half::from_f32(b[i]),
-                Half::ONE,
-            ]
-        })
+    let planes = layer
+        .channel_data
+        .list
+        .into_iter()
+        .filter(|c| c.sample_data.len() == n)
+        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
         .collect();
-    frame.depth = plane("Z")?;
-    let [mx, my] = [plane("motion.X")?, plane("motion.Y")?];
-    frame.motion = mx.into_iter().zip(my).map(|(x, y)| [x, y]).collect();
+    Ok(ExrPlanes {
+        path: path.to_owned(),
+        planes,
+    })
+}
+
+/// Reads the pixels of one frame from `path` into `frame`, whose metadata is
+/// already known. The header is checked (size, channels) before any pixel is
+/// decoded.
+pub fn read_exr(path: &Path, frame: &mut Frame) -> Result<(), DumpError> {
+    let size = frame.meta.size;
+    let required: Vec<&str> = BufferKind::REQUIRED
+        .iter()
+        .flat_map(|k| channel_names(*k).iter().copied())
+        .collect();
+    let planes = read_planes(path, size, &required)?;
+    let n = size.pixels() as usize;
+    let [r, g, b] = [
+        planes.require("R")?,
+        planes.require("G")?,
+        planes.require("B")?,
+    ];
+    frame.color = (0..n).map(|i| rgb_pixel(r[i], g[i], b[i])).collect();
+    frame.depth = planes.require("Z")?.to_vec();
+    frame.motion = zip_motion(planes.require("motion.X")?, planes.require("motion.Y")?);
     frame.extras.clear();
     for kind in [BufferKind::Normal, BufferKind::Albedo, BufferKind::Mask] {
         let names = channel_names(kind);
-        if !names.iter().all(|n| find(n).is_some()) {
-            continue;
-        }
-        let planes = names
+        let Some(found) = names
             .iter()
-            .map(|n| plane(n))
-            .collect::<Result<Vec<_>, _>>()?;
+            .map(|n| planes.get(n))
+            .collect::<Option<Vec<_>>>()
+        else {
+            continue;
+        };
         let data = if kind == BufferKind::Mask {
-            planes[0]
-                .iter()
-                .map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8)
-                .collect()
+            mask_bytes(found[0])
         } else {
             let stride = kind.canonical_format().channels() as usize;
             let mut data = Vec::with_capacity(n * stride * 2);
             for i in 0..n {
                 for c in 0..stride {
-                    let v = planes.get(c).map_or(1.0, |p| p[i]);
+                    let v = found.get(c).map_or(1.0, |p| p[i]);
                     data.extend_from_slice(&Half::from_f32(v).to_le_bytes());
                 }
             }
@@ -222,4 +270,27 @@ pub fn read_exr(path: &Path, frame: &mut Frame) -> Result<(), DumpError> {
         frame.extras.push(ExtraBuffer { kind, data });
     }
     Ok(())
+}
+
+/// One colour pixel from linear RGB (alpha is not part of the contract: 1).
+pub(crate) fn rgb_pixel(r: f32, g: f32, b: f32) -> [Half; 4] {
+    [
+        Half::from_f32(r),
+        Half::from_f32(g),
+        Half::from_f32(b),
+        Half::ONE,
+    ]
+}
+
+/// Motion vectors from their x and y planes.
+fn zip_motion(x: &[f32], y: &[f32]) -> Vec<[f32; 2]> {
+    x.iter().zip(y).map(|(&x, &y)| [x, y]).collect()
+}
+
+/// A mask plane in `[0, 1]` as the 8-bit values the mask buffer holds.
+pub(crate) fn mask_bytes(plane: &[f32]) -> Vec<u8> {
+    plane
+        .iter()
+        .map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8)
+        .collect()
 }

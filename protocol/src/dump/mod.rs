@@ -31,6 +31,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 pub use exr_io::{PANIC_DETAIL, channel_names};
+pub(crate) use exr_io::{PlaneOut, mask_bytes, read_planes, rgb_pixel, write_planes};
 
 use crate::frame::{Frame, FrameMeta, FrameSize};
 use crate::{CONVENTIONS_VERSION, Limits, ValidationError};
@@ -236,7 +237,7 @@ pub enum DumpError {
 }
 
 impl DumpError {
-    fn io(path: &Path, source: std::io::Error) -> Self {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
         DumpError::Io {
             path: path.to_owned(),
             source,
@@ -270,7 +271,7 @@ pub fn frame_paths(dir: &Path, position: u64) -> (PathBuf, PathBuf) {
 /// Reads a whole small regular file, never more than `max` bytes: the file
 /// is opened once and the read itself is capped, so a FIFO, a device or a
 /// file that grows meanwhile cannot exhaust memory.
-fn read_capped(path: &Path, max: u64) -> Result<Vec<u8>, DumpError> {
+pub(crate) fn read_capped(path: &Path, max: u64) -> Result<Vec<u8>, DumpError> {
     let file = fs::File::open(path).map_err(|e| DumpError::io(path, e))?;
     let meta = file.metadata().map_err(|e| DumpError::io(path, e))?;
     if !meta.is_file() {
@@ -294,7 +295,7 @@ fn read_capped(path: &Path, max: u64) -> Result<Vec<u8>, DumpError> {
 }
 
 /// Maps "file not found" to [`DumpError::MissingFrame`], other errors as is.
-fn missing_as_frame(e: DumpError, position: u64) -> DumpError {
+pub(crate) fn missing_as_frame(e: DumpError, position: u64) -> DumpError {
     match e {
         DumpError::Io { path, source } if source.kind() == std::io::ErrorKind::NotFound => {
             DumpError::MissingFrame { position, path }
