@@ -1,9 +1,11 @@
-//! `server inspect DIR`: reads every frame of a dump and reports what a
-//! stream of it would carry, and anything wrong: unreadable frames, indices
-//! or times that do not increase, non-finite pixels.
+//! `server inspect DIR`: reads every frame of a dump (native, or a Blender
+//! or Unreal folder through the importers) and reports what a stream of it
+//! would carry, and anything wrong: unreadable frames, indices or times that
+//! do not increase, non-finite pixels, and motion vectors that disagree
+//! with depth + camera (`protocol::import::reprojection`).
 
 use protocol::Frame;
-use protocol::dump::{DumpError, DumpReader};
+use protocol::import::{AnyDump, ImportError, ReprojectionCheck, ReprojectionReport};
 
 /// Per-dump findings.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -24,6 +26,8 @@ pub struct Report {
     pub max_motion: f32,
     /// Mean time between frames, seconds.
     pub mean_frame_interval: f64,
+    /// Motion vectors against depth + camera on static pixels.
+    pub reprojection: ReprojectionReport,
 }
 
 impl Report {
@@ -57,16 +61,21 @@ impl Report {
 }
 
 /// Reads the whole dump, calling `progress` after each frame.
-pub fn inspect(reader: &DumpReader, mut progress: impl FnMut(u64)) -> Report {
+pub fn inspect(reader: &AnyDump, mut progress: impl FnMut(u64)) -> Report {
     let mut report = Report {
         frames: reader.len(),
         ..Report::default()
     };
     let mut last_time: Option<(f64, u64)> = None;
     let (mut first_time, mut last_ok_time) = (None, None);
+    let mut check = ReprojectionCheck::new();
+    let mut previous = None;
     for i in 0..reader.len() {
-        match reader.read_frame(i) {
-            Ok(f) => {
+        match reader.read_with_origin(i) {
+            Ok((f, from_file)) => {
+                if let Some(prev) = previous.as_ref().filter(|_| !f.meta.cut) {
+                    check.add(prev, &f, from_file.as_deref());
+                }
                 if let Some((t, _)) = last_time {
                     if f.meta.time <= t {
                         report.time_not_increasing += 1;
@@ -76,8 +85,13 @@ pub fn inspect(reader: &DumpReader, mut progress: impl FnMut(u64)) -> Report {
                 first_time.get_or_insert(f.meta.time);
                 last_ok_time = Some(f.meta.time);
                 report.add_frame(&f);
+                previous = Some(f.meta);
             }
-            Err(e) => report.unreadable.push((i, e.to_string())),
+            Err(e) => {
+                report.unreadable.push((i, e.to_string()));
+                // The next frame's motion points into this one.
+                previous = None;
+            }
         }
         progress(i + 1);
     }
@@ -87,15 +101,16 @@ pub fn inspect(reader: &DumpReader, mut progress: impl FnMut(u64)) -> Report {
             report.mean_frame_interval = (b - a) / (read - 1) as f64;
         }
     }
+    report.reprojection = check.finish();
     report
 }
 
-/// Opens and inspects `dir`.
+/// Opens and inspects `dir`, whatever its layout.
 pub fn inspect_dir(
     dir: &std::path::Path,
     progress: impl FnMut(u64),
-) -> Result<(DumpReader, Report), DumpError> {
-    let reader = DumpReader::open(dir)?;
+) -> Result<(AnyDump, Report), ImportError> {
+    let reader = AnyDump::open(dir)?;
     let report = inspect(&reader, progress);
     Ok((reader, report))
 }
@@ -155,5 +170,11 @@ mod tests {
         assert_eq!(r.max_motion, 5.0);
         assert!((r.mean_frame_interval - 0.125).abs() < 1e-12);
         assert!(!r.is_clean());
+        // Frames 1 and 2 follow a readable frame; 2 is a cut; the camera
+        // never moves, so the 3-4-5 vectors are 5 px off wherever depth is
+        // valid.
+        assert_eq!(r.reprojection.frames, 1);
+        assert!((r.reprojection.mean_px - 5.0).abs() < 1e-9);
+        assert_eq!(r.reprojection.warnings.len(), 1);
     }
 }

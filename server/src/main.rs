@@ -442,20 +442,24 @@ fn info(spec: Option<&str>, list: bool) -> anyhow::Result<()> {
 }
 
 fn inspect(dir: &Path) -> anyhow::Result<()> {
-    let reader = protocol::dump::DumpReader::open(dir)
-        .with_context(|| format!("opening {}", dir.display()))?;
-    let m = reader.manifest();
-    println!(
-        "{}: {} frames, {}x{} at {} fps, format v{}, conventions v{}\nsource: {}",
-        dir.display(),
-        m.frame_count,
-        m.width,
-        m.height,
-        m.fps,
-        m.format_version,
-        m.conventions_version,
-        m.source
-    );
+    let reader = AnyDump::open(dir).with_context(|| format!("opening {}", dir.display()))?;
+    match &reader {
+        AnyDump::Native(native) => {
+            let m = native.manifest();
+            println!(
+                "{}: {} frames, {}x{} at {} fps, format v{}, conventions v{}\nsource: {}",
+                dir.display(),
+                m.frame_count,
+                m.width,
+                m.height,
+                m.fps,
+                m.format_version,
+                m.conventions_version,
+                m.source
+            );
+        }
+        foreign => print_source(foreign),
+    }
     let bar = progress(reader.len(), "frames");
     let report = server::inspect::inspect(&reader, |i| bar.set_position(i));
     bar.finish_and_clear();
@@ -478,6 +482,7 @@ fn inspect(dir: &Path) -> anyhow::Result<()> {
             report.bad_values
         );
     }
+    print_reprojection(&report.reprojection);
     anyhow::ensure!(report.is_clean(), "the dump has problems (see above)");
     println!("ok");
     Ok(())
@@ -491,14 +496,7 @@ fn import(src: &Path, out: &Path, format: ImportFormat) -> anyhow::Result<()> {
     };
     let dump = AnyDump::open_as(src, format)
         .with_context(|| format!("opening {} as {}", src.display(), format.name()))?;
-    println!(
-        "{}: {} frames, {}x{} at {} fps",
-        dump.describe(),
-        dump.len(),
-        dump.size().width,
-        dump.size().height,
-        dump.fps()
-    );
+    print_source(&dump);
     let bar = progress(dump.len(), "frames");
     let report = protocol::import::import(&dump, out, |i| bar.set_position(i))?;
     bar.finish_and_clear();
@@ -512,7 +510,13 @@ fn import(src: &Path, out: &Path, format: ImportFormat) -> anyhow::Result<()> {
         let what = if p.skipped { "skipped" } else { "kept" };
         println!("frame {} ({what}): {}", p.position, p.detail);
     }
-    let r = &report.reprojection;
+    print_reprojection(&report.reprojection);
+    Ok(())
+}
+
+/// Prints the motion check of `import` and `inspect`, its alternatives and
+/// its warnings (on stderr, loudly).
+fn print_reprojection(r: &protocol::import::ReprojectionReport) {
     if r.pixels == 0 {
         println!("motion check: no pixel to check (one frame, or every pixel masked)");
     } else {
@@ -537,5 +541,16 @@ fn import(src: &Path, out: &Path, format: ImportFormat) -> anyhow::Result<()> {
     for w in &r.warnings {
         eprintln!("WARNING: {w}");
     }
-    Ok(())
+}
+
+/// One line on a dump: what it is, how many frames, size and rate.
+fn print_source(dump: &AnyDump) {
+    println!(
+        "{}: {} frames, {}x{} at {} fps",
+        dump.describe(),
+        dump.len(),
+        dump.size().width,
+        dump.size().height,
+        dump.fps()
+    );
 }
