@@ -75,7 +75,10 @@ pub struct Settings {
     /// Relative depth margin for "deeper" in background case 2.
     pub depth_tolerance: f32,
     /// Push-pull pyramid levels for the remaining holes (≥ 1; capped at
-    /// the frame's full depth).
+    /// the frame's full depth). The default, [`Settings::FULL_PYRAMID`],
+    /// goes down to 1×1, so a hole of any width is filled: GeoMotionGen's
+    /// 7 levels (128 px cells) left holes wider than ~512 px black, e.g. at
+    /// 8192×16 under a fast turn. The extra levels are tiny.
     pub pushpull_levels: u32,
     /// A frame whose share of dynamic pixels exceeds this is treated as a
     /// camera cut (history and background restart). > 1 disables it.
@@ -97,7 +100,7 @@ impl Default for Settings {
             background_levels: 2,
             static_epsilon: 0.5,
             depth_tolerance: 0.02,
-            pushpull_levels: 7,
+            pushpull_levels: Self::FULL_PYRAMID,
             cut_dynamic_fraction: 0.9,
             max_alpha: 16.0,
             display_size: None,
@@ -106,6 +109,10 @@ impl Default for Settings {
 }
 
 impl Settings {
+    /// A push-pull pyramid as deep as the frame allows (down to 1×1): the
+    /// largest accepted `pushpull_levels`, capped per frame.
+    pub const FULL_PYRAMID: u32 = 16;
+
     /// Settings for `method` with every other value at its default.
     pub fn for_method(method: Method) -> Self {
         Self {
@@ -138,7 +145,7 @@ impl Settings {
         if !(self.depth_tolerance.is_finite() && self.depth_tolerance >= 0.0) {
             return bad("depth tolerance must be finite and ≥ 0".into());
         }
-        if !(1..=16).contains(&self.pushpull_levels) {
+        if !(1..=Self::FULL_PYRAMID).contains(&self.pushpull_levels) {
             return bad("push-pull levels must be in 1..=16".into());
         }
         if self.cut_dynamic_fraction.is_nan() {

@@ -148,18 +148,21 @@ impl Source {
         })
     }
 
-    /// Stops the producer and waits for it.
-    pub fn stop(mut self) {
+    /// Stops the producer and waits for it (as dropping does).
+    pub fn stop(self) {}
+}
+
+impl Drop for Source {
+    /// Stops the producer and waits for it: it finishes the frame it is on
+    /// (one render or read, at most a frame interval of pacing). A producer
+    /// left running could still be inside the GPU driver when the process
+    /// exits, and Mesa's lavapipe then crashes during teardown (seen as a
+    /// SIGSEGV after every test of a binary had passed).
+    fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
-    }
-}
-
-impl Drop for Source {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
     }
 }
 

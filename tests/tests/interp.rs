@@ -75,12 +75,13 @@ fn identical_frames_interpolate_to_themselves() {
     }
 }
 
-/// Seed 003, Limitations: the 7-level pyramid dissipates motion about 512
-/// pixels. A frame whose only written pixels are a small patch moving by
-/// more than that leaves the far side of the unwritten region with the
-/// pyramid's average motion: the seed's tearing (the previous frame is
-/// fetched from the wrong place) — documented, and never a NaN or an
-/// out-of-bounds read.
+/// Seed 003, Limitations: the seed's 7-level pyramid dissipates motion
+/// about 512 pixels. A frame whose only written pixels are a small patch
+/// moving by more than that leaves the far side of the unwritten region
+/// with the pyramid's average motion: the seed's tearing (the previous frame
+/// is fetched from the wrong place), never a NaN or an out-of-bounds read.
+/// The default full-depth pyramid (11 levels at 1024 px) carries the
+/// patch's motion across the whole width instead.
 #[test]
 fn motion_beyond_the_dissipation_limit_tears_but_stays_finite() {
     let (w, h) = (1024u32, 64u32);
@@ -97,48 +98,59 @@ fn motion_beyond_the_dissipation_limit_tears_but_stays_finite() {
     let ctx = GpuContext::new().unwrap();
     // This synthetic frame fails the static test almost everywhere: keep
     // cut detection from restarting on it.
-    let settings = Settings {
-        cut_dynamic_fraction: 2.0,
-        ..interp()
-    };
-    for mut g in [
-        FrameGenerator::cpu(settings).unwrap(),
-        FrameGenerator::gpu(settings, ctx.clone()).unwrap(),
-    ] {
-        g.push(&base[0]).unwrap();
-        g.push(&cur).unwrap();
-        let out = g.generate(0.5).unwrap();
-        assert!(
-            out.output
-                .color
-                .iter()
-                .all(|c| c.iter().all(|v| v.is_finite()))
-        );
-        assert!(
-            out.frame
-                .motion
-                .iter()
-                .all(|m| m.iter().all(|v| v.is_finite()))
-        );
-        // Written pixels: the patch landed 300 px to the right.
-        let written: Vec<u32> = (0..w * h)
-            .filter(|&t| out.mask[t as usize] == PixelSource::Warped)
-            .map(|t| t % w)
-            .collect();
-        assert!(!written.is_empty() && written.iter().all(|&x| (300..316).contains(&x)));
-        // Near the patch the inpainted motion is the patch's; beyond
-        // ~512 px from it the motion has dissipated (decayed toward 0).
-        let mx = |x: u32| out.output.motion[(32 * w + x) as usize][0];
-        assert!(
-            (mx(320) - 300.0).abs() < 1.0,
-            "next to the patch: {}",
-            mx(320)
-        );
-        assert!(
-            mx(1023) < 300.0,
-            "far side keeps only part of the motion: {}",
-            mx(1023)
-        );
+    for levels in [7, Settings::FULL_PYRAMID] {
+        let settings = Settings {
+            cut_dynamic_fraction: 2.0,
+            pushpull_levels: levels,
+            ..interp()
+        };
+        for mut g in [
+            FrameGenerator::cpu(settings).unwrap(),
+            FrameGenerator::gpu(settings, ctx.clone()).unwrap(),
+        ] {
+            g.push(&base[0]).unwrap();
+            g.push(&cur).unwrap();
+            let out = g.generate(0.5).unwrap();
+            assert!(
+                out.output
+                    .color
+                    .iter()
+                    .all(|c| c.iter().all(|v| v.is_finite()))
+            );
+            assert!(
+                out.frame
+                    .motion
+                    .iter()
+                    .all(|m| m.iter().all(|v| v.is_finite()))
+            );
+            // Written pixels: the patch landed 300 px to the right.
+            let written: Vec<u32> = (0..w * h)
+                .filter(|&t| out.mask[t as usize] == PixelSource::Warped)
+                .map(|t| t % w)
+                .collect();
+            assert!(!written.is_empty() && written.iter().all(|&x| (300..316).contains(&x)));
+            // Near the patch the inpainted motion is the patch's; beyond
+            // ~512 px from it the motion has dissipated (decayed toward 0).
+            let mx = |x: u32| out.output.motion[(32 * w + x) as usize][0];
+            assert!(
+                (mx(320) - 300.0).abs() < 1.0,
+                "next to the patch: {}",
+                mx(320)
+            );
+            if levels == 7 {
+                assert!(
+                    mx(1023) < 300.0,
+                    "far side keeps only part of the motion: {}",
+                    mx(1023)
+                );
+            } else {
+                assert!(
+                    (mx(1023) - 300.0).abs() < 1.0,
+                    "the full pyramid reaches the far side: {}",
+                    mx(1023)
+                );
+            }
+        }
     }
 }
 

@@ -30,15 +30,16 @@
 //!   smallest source index) picks the nearest fragment deterministically,
 //!   with no resolution limit beyond 2³² pixels.
 //! * **Push-pull.** The seed's pyramid is 7 levels (6 pull and 6 push
-//!   passes); the level count is the `pushpull_levels` setting (default 7).
+//!   passes); the level count is the `pushpull_levels` setting, by default
+//!   the frame's full depth (down to 1×1), which lifts the limit below.
 //!   A coarse texel averages the written motion of its children; a pixel
 //!   left unwritten takes the (bilinear) coarser value and stays flagged
 //!   unwritten.
-//! * **The 512-pixel limit.** A texel of level 6 spans 64 pixels, and the
-//!   bilinear push reaches about as far again, so motion dissipates about
-//!   `2^(levels+2)` = 512 pixels from where it was written. An unwritten
-//!   region wider than that gets the pyramid's average motion (0 if nothing
-//!   was written at all) and fetches the previous frame nearly in place:
+//! * **The 512-pixel limit** (of a 7-level pyramid). A texel of level 6
+//!   spans 64 pixels, and the bilinear push reaches about as far again, so
+//!   motion dissipates about `2^(levels+2)` = 512 pixels from where it was
+//!   written. With fewer levels, an unwritten region wider than that gets
+//!   the pyramid's average motion (0 if nothing was written at all) and fetches the previous frame nearly in place:
 //!   the seed's tearing, but never a NaN or an out-of-bounds read (every
 //!   fetch is clamped to the image).
 //! * **Outputs.** Depth is the fetched frame's depth (nearest pixel); the
