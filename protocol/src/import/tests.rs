@@ -72,7 +72,7 @@ fn unsupported_cameras_are_refused() {
 
 #[test]
 fn malformed_sidecars_are_typed_errors() {
-    let cases: [(&str, Edit); 7] = [
+    let cases: [(&str, Edit); 8] = [
         ("format", |j| j["format"] = "something-else".into()),
         ("file name", |j| {
             j["frames"][1]["file"] = "../0002.exr".into()
@@ -89,6 +89,10 @@ fn malformed_sidecars_are_typed_errors() {
             }
         }),
         ("clip", |j| camera_of(j, 0)["clip_start"] = 0.0.into()),
+        ("span", |j| {
+            j["frames"][0]["frame"] = i64::MIN.into();
+            j["frames"][9]["frame"] = i64::MAX.into();
+        }),
     ];
     for (what, edit) in cases {
         let dir = blender_copy(edit);

@@ -46,6 +46,18 @@ impl Timeline {
                 ));
             }
         }
+        if let (Some(first), Some(last)) = (entries.first(), entries.last()) {
+            // Indices count from the first frame; the span must fit.
+            if last.number.checked_sub(first.number).is_none() {
+                return Err(ImportError::sidecar(
+                    sidecar,
+                    format!(
+                        "frame numbers {} … {} span more than an index can hold",
+                        first.number, last.number
+                    ),
+                ));
+            }
+        }
         if let Some(e) = entries.iter().find(|e| !e.time.is_finite()) {
             return Err(ImportError::sidecar(
                 sidecar,
