@@ -12,17 +12,34 @@ use protocol::FrameSize;
 use protocol::dump::{DumpWriter, Manifest};
 
 #[derive(Parser)]
-#[command(version, about = "Frame-generation streaming client")]
+#[command(
+    version,
+    about = "Frame-generation streaming client: receives rendered frames over QUIC and generates the ones in between (repeat, reproject, gffe, interp)",
+    after_help = "Main commands:
+  client                              the demo: an in-process server, gffe 30 -> 60 fps, 5 s
+  client run --method interp -n 2     another method (repeat, reproject, gffe, interp) and n
+  client connect --pin FP --token T   receive from `server serve`
+  client eval                         quality against milliseconds for every method
+
+The GPU: Vulkan first (Mesa's lavapipe without a GPU), OpenGL as the fallback;
+--adapter NAME or WGPU_BACKEND=vulkan|gl choose. Without any adapter:
+apt-get install -y mesa-vulkan-drivers libvulkan1"
+)]
 struct Cli {
     /// Without a subcommand: `run` with its defaults (the demo).
     #[command(subcommand)]
     command: Option<Command>,
+    /// Use the GPU adapter whose name contains NAME (e.g. llvmpipe,
+    /// lavapipe, nvidia); WGPU_BACKEND restricts the backends.
+    #[arg(long, global = true, env = "WGPU_ADAPTER_NAME", value_name = "NAME")]
+    adapter: Option<String>,
 }
 
 /// Options of `run`.
 #[derive(Args, Clone, Debug)]
 struct RunArgs {
-    /// Frame generation method: repeat, reproject or gffe.
+    /// Frame generation method: repeat, reproject, gffe (extrapolation, no
+    /// added latency) or interp (interpolation, one render interval later).
     #[arg(long, default_value = "gffe")]
     method: Method,
     /// Generated frames per rendered frame (display = (n+1) × render rate).
@@ -109,13 +126,24 @@ fn parse_size(s: &str) -> Result<FrameSize, String> {
 #[derive(Subcommand)]
 enum Command {
     /// Receive frames, generate the in-between ones and present them
-    /// (headless), then print the latency summary. Without --server it
-    /// starts an in-process server on loopback rendering the scene.
+    /// (in a window when there is a display, else headless), then print the
+    /// latency summary. Without --server it starts an in-process server on
+    /// loopback rendering the scene.
+    #[command(after_help = "Examples:
+  client run                                         gffe, 320x180, 30 -> 60 fps, 5 s
+  client run --method interp --size 640x360 --seconds 10
+  client run --server 127.0.0.1:4433 --pin FP --token T --json report.json")]
     Run(RunArgs),
     /// Connect to a server and receive frames.
+    #[command(after_help = "Example:
+  client connect --pin FINGERPRINT --token TOKEN --seconds 5 --dump-to /tmp/rx")]
     Connect(ConnectArgs),
     /// Measure every method and setting against ground truth and time:
     /// writes report.md, report.json, plots and ꟻLIP heat maps.
+    #[command(after_help = "Examples:
+  client eval                                        builtin:default, every setting -> eval-report/
+  client eval --all-scenes --sweep methods
+  client eval --dump DIR --sweep methods --out /tmp/report")]
     Eval(EvalArgs),
 }
 
@@ -205,11 +233,20 @@ struct ConnectArgs {
     dump_to: Option<PathBuf>,
 }
 
-fn main() -> anyhow::Result<()> {
+/// An error ends the process with one line on stderr (the whole chain, no
+/// backtrace) and a non-zero status.
+fn main() -> Result<(), gpu_device::OneLine> {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .init();
-    match Cli::parse().command {
+    Ok(command(Cli::parse())?)
+}
+
+fn command(cli: Cli) -> anyhow::Result<()> {
+    if let Some(name) = &cli.adapter {
+        gpu_device::prefer_adapter(name);
+    }
+    match cli.command {
         None => run(RunArgs::default()),
         Some(Command::Run(args)) => run(args),
         Some(Command::Connect(args)) => connect(args),

@@ -179,8 +179,8 @@ impl ApplicationHandler<Event> for App {
 /// The wgpu side of the window.
 struct Gfx {
     surface: wgpu::Surface<'static>,
-    device: wgpu::Device,
-    queue: wgpu::Queue,
+    /// The device (errors typed, never wgpu's panic).
+    gpu: gpu_device::Device,
     config: wgpu::SurfaceConfiguration,
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
@@ -226,29 +226,31 @@ fn fs(in: VsOut) -> @location(0) vec4<f32> {
 impl Gfx {
     fn new(window: Arc<Window>) -> anyhow::Result<Self> {
         let size = window.inner_size();
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        // The display handle lets wgpu's OpenGL backend (EGL) present to the
+        // window too; without it only Vulkan could.
+        let instance = wgpu::Instance::new(
+            wgpu::InstanceDescriptor::new_with_display_handle_from_env(Box::new(window.clone())),
+        );
         let surface = instance.create_surface(window)?;
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            force_fallback_adapter: false,
-            compatible_surface: Some(&surface),
-            apply_limit_buckets: false,
-        }))?;
-        let (device, queue) =
-            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        let adapter = gpu_device::adapter_for_surface(&instance, &surface)?;
+        let gpu = gpu_device::Device::open(
+            &adapter,
+            &wgpu::DeviceDescriptor {
                 label: Some("window"),
                 required_features: wgpu::Features::empty(),
                 required_limits: adapter.limits(),
                 experimental_features: wgpu::ExperimentalFeatures::disabled(),
                 memory_hints: wgpu::MemoryHints::Performance,
                 trace: wgpu::Trace::Off,
-            }))?;
+            },
+        )?;
+        let scope = gpu.scope("building the window's pipeline");
+        let (device, queue) = (&gpu.device, &gpu.queue);
         let mut config = surface
             .get_default_config(&adapter, size.width.max(1), size.height.max(1))
             .ok_or_else(|| anyhow::anyhow!("the surface is not supported by the adapter"))?;
         config.present_mode = wgpu::PresentMode::Fifo;
-        surface.configure(&device, &config);
+        surface.configure(device, &config);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("image"),
             entries: &[
@@ -305,12 +307,12 @@ impl Gfx {
             min_filter: wgpu::FilterMode::Linear,
             ..Default::default()
         });
-        let target = Self::make_target(&device, &layout, &sampler, &config);
-        let text = Text::new(&device, &queue, config.format);
+        let target = Self::make_target(device, &layout, &sampler, &config);
+        let text = Text::new(device, queue, config.format);
+        scope.finish()?;
         Ok(Self {
             surface,
-            device,
-            queue,
+            gpu,
             config,
             pipeline,
             layout,
@@ -353,8 +355,9 @@ impl Gfx {
         }
         self.config.width = width;
         self.config.height = height;
-        self.surface.configure(&self.device, &self.config);
-        self.target = Self::make_target(&self.device, &self.layout, &self.sampler, &self.config);
+        self.surface.configure(&self.gpu.device, &self.config);
+        self.target =
+            Self::make_target(&self.gpu.device, &self.layout, &self.sampler, &self.config);
     }
 
     fn draw(&mut self, w: u32, h: u32, rgba: &[u8], stats: Option<&str>) -> anyhow::Result<()> {
@@ -366,7 +369,7 @@ impl Gfx {
             wgpu::TextureFormat::Rgba8Unorm
         };
         if self.image.as_ref().is_none_or(|i| (i.2, i.3) != (w, h)) {
-            let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            let texture = self.gpu.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("presented frame"),
                 size: wgpu::Extent3d {
                     width: w,
@@ -380,13 +383,13 @@ impl Gfx {
                 usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
                 view_formats: &[],
             });
-            let group = bind(&self.device, &self.layout, &self.sampler, &texture);
+            let group = bind(&self.gpu.device, &self.layout, &self.sampler, &texture);
             self.image = Some((texture, group, w, h));
         }
         let Some((texture, image_group, ..)) = &self.image else {
             return Ok(());
         };
-        self.queue.write_texture(
+        self.gpu.queue.write_texture(
             texture.as_image_copy(),
             rgba,
             wgpu::TexelCopyBufferLayout {
@@ -398,15 +401,15 @@ impl Gfx {
         );
         if let Some(stats) = stats {
             self.text.prepare(
-                &self.device,
-                &self.queue,
+                &self.gpu.device,
+                &self.gpu.queue,
                 stats,
                 self.config.width,
                 self.config.height,
             )?;
         }
         let target_view = self.target.0.create_view(&Default::default());
-        let mut encoder = self.device.create_command_encoder(&Default::default());
+        let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = begin(&mut encoder, &target_view);
             pass.set_pipeline(&self.pipeline);
@@ -435,14 +438,16 @@ impl Gfx {
             pass.set_bind_group(0, &self.target.1, &[]);
             pass.draw(0..3, 0..1);
         }
-        self.queue.submit([encoder.finish()]);
+        self.gpu.queue.submit([encoder.finish()]);
         if let Some(frame) = frame {
-            self.queue.present(frame);
+            self.gpu.queue.present(frame);
         }
         if reconfigure {
-            self.surface.configure(&self.device, &self.config);
+            self.surface.configure(&self.gpu.device, &self.config);
         }
         self.text.atlas.trim();
+        // An error wgpu reported for this frame (recorded, not a panic).
+        self.gpu.check("presenting a frame")?;
         Ok(())
     }
 
@@ -450,13 +455,13 @@ impl Gfx {
     fn save(&self, path: &std::path::Path) -> anyhow::Result<()> {
         let (w, h) = (self.config.width, self.config.height);
         let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+        let buffer = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("screenshot"),
             size: u64::from(row) * u64::from(h),
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
             mapped_at_creation: false,
         });
-        let mut encoder = self.device.create_command_encoder(&Default::default());
+        let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
         encoder.copy_texture_to_buffer(
             self.target.0.as_image_copy(),
             wgpu::TexelCopyBufferInfo {
@@ -469,10 +474,10 @@ impl Gfx {
             },
             self.target.0.size(),
         );
-        self.queue.submit([encoder.finish()]);
+        self.gpu.queue.submit([encoder.finish()]);
         let slice = buffer.slice(..);
         slice.map_async(wgpu::MapMode::Read, |_| {});
-        self.device.poll(wgpu::PollType::Wait {
+        self.gpu.device.poll(wgpu::PollType::Wait {
             submission_index: None,
             timeout: None,
         })?;

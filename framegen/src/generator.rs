@@ -269,9 +269,13 @@ impl FrameGenerator {
         Self::with_backend(settings, Box::new(crate::cpu::CpuBackend::default()))
     }
 
-    /// A generator on wgpu.
+    /// A generator on wgpu. A kernel the device cannot build (e.g. a
+    /// limit of wgpu's OpenGL backend) is a typed error.
     pub fn gpu(settings: Settings, ctx: Arc<GpuContext>) -> Result<Self, FramegenError> {
-        Self::with_backend(settings, Box::new(crate::gpu::GpuBackend::new(ctx)))
+        let backend = ctx.checked("compiling the generator's kernels", || {
+            crate::gpu::GpuBackend::new(ctx.clone())
+        })?;
+        Self::with_backend(settings, Box::new(backend))
     }
 
     /// A generator on any backend.

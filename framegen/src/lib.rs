@@ -43,9 +43,10 @@ pub use settings::{Method, Settings};
 /// Everything that can go wrong in frame generation.
 #[derive(Debug, thiserror::Error)]
 pub enum FramegenError {
-    /// No GPU adapter could be opened.
-    #[error("no GPU adapter: {0}")]
-    NoAdapter(String),
+    /// No usable GPU: no adapter, a missing capability, a frame too large
+    /// for the device, or an error wgpu reported.
+    #[error(transparent)]
+    Gpu(#[from] gpu_device::GpuError),
     /// The device failed or was lost.
     #[error("GPU device error: {0}")]
     Device(String),

@@ -14,10 +14,28 @@ use server::scene::{Scene, builtin};
 use server::source::{Feed, Source, SourceSpec};
 
 #[derive(Parser)]
-#[command(version, about = "Frame-generation streaming server")]
+#[command(
+    version,
+    about = "Frame-generation streaming server: renders scenes (wgpu) or replays dumps and streams HDR colour, depth, motion and camera over QUIC",
+    after_help = "Main commands:
+  server record                     render builtin:default (1280x720, 2 s) into dumps/
+  server serve                      stream builtin:default live at 640x360 over QUIC
+  server serve --dump DIR --loop    stream a dump (native, Blender or Unreal)
+  server info --list                the built-in scenes
+  server inspect DIR                check a dump
+  server import SRC --out DIR       convert a Blender render or an Unreal capture
+
+The GPU: Vulkan first (Mesa's lavapipe without a GPU), OpenGL as the fallback;
+--adapter NAME or WGPU_BACKEND=vulkan|gl choose. Without any adapter:
+apt-get install -y mesa-vulkan-drivers libvulkan1"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Use the GPU adapter whose name contains NAME (e.g. llvmpipe,
+    /// lavapipe, nvidia); WGPU_BACKEND restricts the backends.
+    #[arg(long, global = true, env = "WGPU_ADAPTER_NAME", value_name = "NAME")]
+    adapter: Option<String>,
 }
 
 #[derive(clap::Args)]
@@ -53,8 +71,15 @@ struct RecordArgs {
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene into a dump (OpenEXR + JSON per frame).
+    #[command(after_help = "Examples:
+  server record                                      builtin:default, 1280x720, 2 s
+  server record builtin:crossing --size 640x360 --seconds 1 --png --out /tmp/crossing")]
     Record(RecordArgs),
     /// Stream a scene (rendered live) or a dump over QUIC to clients.
+    #[command(after_help = "Examples:
+  server serve                                   builtin:default at 640x360, 30 fps on 127.0.0.1:4433
+  server serve --dump dumps/default-1 --loop     a dump, looped, as one live stream
+Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
     Serve {
         /// `builtin:NAME` or a RON scene file (ignored with --dump).
         #[arg(default_value = "builtin:default")]
@@ -89,6 +114,9 @@ enum Command {
         color_codec: protocol::Codec,
     },
     /// Show what a scene declares and which passes it builds.
+    #[command(after_help = "Examples:
+  server info --list
+  server info builtin:default")]
     Info {
         /// `builtin:NAME` or a path; omit with --list.
         scene: Option<String>,
@@ -97,12 +125,16 @@ enum Command {
         list: bool,
     },
     /// Read every frame of a dump and report its contents and any problem.
+    #[command(after_help = "Example:
+  server inspect dumps/default-1700000000")]
     Inspect {
         /// The dump directory (holding manifest.json).
         dir: PathBuf,
     },
     /// Convert a Blender render or an Unreal capture into a dump, checking
     /// its motion vectors against depth + camera.
+    #[command(after_help = "Example:
+  server import tests/fixtures/blender --out /tmp/blender-dump")]
     Import {
         /// The source directory (holding cameras.json).
         src: PathBuf,
@@ -155,11 +187,20 @@ fn parse_size(s: &str) -> Result<FrameSize, String> {
     Ok(FrameSize::new(w, h))
 }
 
-fn main() -> anyhow::Result<()> {
+/// An error ends the process with one line on stderr (the whole chain, no
+/// backtrace) and a non-zero status.
+fn main() -> Result<(), gpu_device::OneLine> {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .init();
-    match Cli::parse().command {
+    Ok(command(Cli::parse())?)
+}
+
+fn command(cli: Cli) -> anyhow::Result<()> {
+    if let Some(name) = &cli.adapter {
+        gpu_device::prefer_adapter(name);
+    }
+    match cli.command {
         Command::Record(args) => record(&args),
         Command::Info { scene, list } => info(scene.as_deref(), list),
         Command::Serve {

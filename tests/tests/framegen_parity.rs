@@ -323,7 +323,19 @@ fn crop_matches() {
 /// The whole pipeline, every method, every hard case, α = 0.5 and 2.
 #[test]
 fn whole_pipeline_matches() {
-    let ctx = ctx();
+    whole_pipeline_matches_on(&ctx());
+}
+
+/// The same on wgpu's OpenGL backend, what a machine without Mesa's Vulkan
+/// driver has (llvmpipe), within the same bounds.
+#[test]
+fn whole_pipeline_matches_on_opengl() {
+    let adapter = gpu_device::adapter_on(wgpu::Backends::GL).expect("an OpenGL adapter");
+    assert_eq!(adapter.get_info().backend, wgpu::Backend::Gl);
+    whole_pipeline_matches_on(&GpuContext::from_adapter(&adapter).expect("a device"));
+}
+
+fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
     for scene in tests::HARD_CASES {
         let fs = frames(scene, 30, 4);
         for method in Method::ALL {

@@ -263,6 +263,75 @@ impl GpuBackend {
 
 impl Backend for GpuBackend {
     fn ingest(&mut self, frame: &Prepared, plan: &IngestPlan) -> Result<u32, FramegenError> {
+        let n = frame.depth.len() as u64;
+        // The largest buffers a frame of this size needs: the k history
+        // positions and the colour (vec4<f32> per pixel).
+        let what = format!("a {}-pixel frame's history (k = {})", n, plan.k);
+        self.ctx
+            .require_buffer(&what, n * u64::from(plan.k.max(1)) * 16, true)?;
+        let scope = self.ctx.scope("ingesting a frame");
+        let out = self.ingest_in_scope(frame, plan);
+        scope.finish()?;
+        out
+    }
+
+    fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
+        let tn = u64::from(job.target.width()) * u64::from(job.target.height());
+        self.ctx
+            .require_buffer("the generated frame's colour", tn * 16, true)?;
+        let scope = self.ctx.scope("generating a frame");
+        let out = self.generate_in_scope(job);
+        scope.finish()?;
+        out
+    }
+
+    fn reset(&mut self) {
+        if let Some(b) = self.current.take() {
+            self.spare = Some(b);
+        }
+    }
+
+    fn timings(&self) -> Vec<PassTime> {
+        self.timings.clone()
+    }
+
+    fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError> {
+        let Some(c) = &self.current else {
+            return Ok(None);
+        };
+        let n = c.n as usize;
+        Ok(Some(Snapshot {
+            positions: bytemuck::cast_slice::<f32, [f32; 4]>(
+                &self
+                    .ctx
+                    .read_pod::<f32>(&c.positions, n * c.k as usize * 4)?,
+            )
+            .to_vec(),
+            track: if c.k == 0 {
+                Vec::new()
+            } else {
+                self.ctx.read_pod(&c.track, n)?
+            },
+            background: self
+                .ctx
+                .read_pod(&c.background, c.levels.total() as usize)?,
+        }))
+    }
+
+    fn name(&self) -> String {
+        format!(
+            "wgpu {} ({:?})",
+            self.ctx.adapter_info.name, self.ctx.adapter_info.backend
+        )
+    }
+}
+
+impl GpuBackend {
+    fn ingest_in_scope(
+        &mut self,
+        frame: &Prepared,
+        plan: &IngestPlan,
+    ) -> Result<u32, FramegenError> {
         self.timings.clear();
         let ctx = &*self.ctx;
         let n = frame.depth.len() as u32;
@@ -386,7 +455,7 @@ impl Backend for GpuBackend {
         Ok(count)
     }
 
-    fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
+    fn generate_in_scope(&mut self, job: &Job) -> Result<Output, FramegenError> {
         let ctx = &*self.ctx;
         self.timings
             .retain(|p| matches!(p.pass, Pass::Upload | Pass::History | Pass::Background));
@@ -618,45 +687,5 @@ impl Backend for GpuBackend {
             });
         }
         Ok(output)
-    }
-
-    fn reset(&mut self) {
-        if let Some(b) = self.current.take() {
-            self.spare = Some(b);
-        }
-    }
-
-    fn timings(&self) -> Vec<PassTime> {
-        self.timings.clone()
-    }
-
-    fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError> {
-        let Some(c) = &self.current else {
-            return Ok(None);
-        };
-        let n = c.n as usize;
-        Ok(Some(Snapshot {
-            positions: bytemuck::cast_slice::<f32, [f32; 4]>(
-                &self
-                    .ctx
-                    .read_pod::<f32>(&c.positions, n * c.k as usize * 4)?,
-            )
-            .to_vec(),
-            track: if c.k == 0 {
-                Vec::new()
-            } else {
-                self.ctx.read_pod(&c.track, n)?
-            },
-            background: self
-                .ctx
-                .read_pod(&c.background, c.levels.total() as usize)?,
-        }))
-    }
-
-    fn name(&self) -> String {
-        format!(
-            "wgpu {} ({:?})",
-            self.ctx.adapter_info.name, self.ctx.adapter_info.backend
-        )
     }
 }

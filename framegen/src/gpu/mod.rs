@@ -27,77 +27,54 @@ pub use backend::GpuBackend;
 pub const COMMON_WGSL: &str = include_str!("common.wgsl");
 
 /// An opened GPU device, shareable between generators (and with a
-/// presenter).
+/// presenter): a [`gpu_device::Device`] (adapter choice, typed errors) with
+/// the storage-buffer helpers every pass uses. Its `device`, `queue` and
+/// `adapter_info` are the inner device's.
 #[derive(Debug)]
 pub struct GpuContext {
-    /// The logical device.
-    pub device: wgpu::Device,
-    /// Its queue.
-    pub queue: wgpu::Queue,
-    /// Adapter name and backend, for reports.
-    pub adapter_info: wgpu::AdapterInfo,
+    gpu: gpu_device::Device,
+}
+
+impl std::ops::Deref for GpuContext {
+    type Target = gpu_device::Device;
+
+    fn deref(&self) -> &Self::Target {
+        &self.gpu
+    }
 }
 
 impl GpuContext {
-    /// Opens an adapter. Without `WGPU_BACKEND` set, Vulkan is preferred
-    /// (Mesa's lavapipe on machines without a GPU) and any other backend is
-    /// the fallback. The device gets the adapter's own limits, because
-    /// 8192-pixel frames need storage buffers beyond WebGPU's defaults.
+    /// Opens the process's adapter ([`gpu_device::adapter`]: `--adapter`,
+    /// `WGPU_BACKEND`, else Vulkan first and any other backend as the
+    /// fallback).
     pub fn new() -> Result<Arc<Self>, FramegenError> {
-        let request = |desc: wgpu::InstanceDescriptor| {
-            let instance = wgpu::Instance::new(desc);
-            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter: false,
-                compatible_surface: None,
-                apply_limit_buckets: false,
-            }))
-        };
-        let adapter = if std::env::var_os("WGPU_BACKEND").is_some() {
-            request(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
-        } else {
-            let mut vulkan = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-            vulkan.backends = wgpu::Backends::VULKAN;
-            request(vulkan).or_else(|_| {
-                request(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
-            })
-        }
-        .map_err(|e| FramegenError::NoAdapter(e.to_string()))?;
-        Self::from_adapter(&adapter)
+        Self::from_adapter(&gpu_device::adapter()?)
     }
 
     /// Opens a device on an adapter the caller picked (e.g. one compatible
-    /// with a window surface).
+    /// with a window surface). The device gets the adapter's own limits,
+    /// because 8192-pixel frames need storage buffers beyond WebGPU's
+    /// defaults.
     pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<Arc<Self>, FramegenError> {
-        let adapter_info = adapter.get_info();
-        let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("framegen"),
-            // Timestamp queries where offered (profiling on hardware).
-            required_features: adapter.features() & timestamps::FEATURES,
-            required_limits: limits,
-            experimental_features: wgpu::ExperimentalFeatures::disabled(),
-            memory_hints: wgpu::MemoryHints::Performance,
-            trace: wgpu::Trace::Off,
-        }))
-        .map_err(|e| FramegenError::Device(e.to_string()))?;
-        tracing::debug!(adapter = %adapter_info.name, backend = ?adapter_info.backend, "framegen GPU ready");
-        Ok(Arc::new(Self {
-            device,
-            queue,
-            adapter_info,
-        }))
+        let gpu = gpu_device::Device::open(
+            adapter,
+            &wgpu::DeviceDescriptor {
+                label: Some("framegen"),
+                // Timestamp queries where offered (profiling on hardware).
+                required_features: adapter.features() & timestamps::FEATURES,
+                required_limits: adapter.limits(),
+                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            },
+        )?;
+        Ok(Arc::new(Self { gpu }))
     }
 
-    /// Blocks until every submitted command buffer has finished.
+    /// Blocks until every submitted command buffer has finished; an error
+    /// wgpu reported meanwhile is returned.
     pub fn wait(&self) -> Result<(), FramegenError> {
-        self.device
-            .poll(wgpu::PollType::Wait {
-                submission_index: None,
-                timeout: None,
-            })
-            .map(|_| ())
-            .map_err(|e| FramegenError::Device(e.to_string()))
+        Ok(self.gpu.wait()?)
     }
 
     /// A zeroed storage buffer of `bytes` bytes (at least 4, so empty frames

@@ -33,9 +33,9 @@ fn fs_background(@builtin(position) p: vec4<f32>) -> GBufferOut {
     let dir = normalize(transpose(view_rot) * ray_view);
     var out: GBufferOut;
     out.color = vec4<f32>(sky(dir), 1.0);
-    out.depth = frame.tan_half.w;
+    out.depth = bitcast<u32>(frame.tan_half.w);
     // w = 0: a point at infinity, which translation does not move.
-    out.motion = prev_pixel(frame.prev_clip_from_camrel * vec4<f32>(dir, 0.0)) - p.xy;
+    out.motion = bitcast<vec2<u32>>(prev_pixel(frame.prev_clip_from_camrel * vec4<f32>(dir, 0.0)) - p.xy);
     out.id = 0u;
     return out;
 }

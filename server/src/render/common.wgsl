@@ -58,11 +58,14 @@ struct ObjectUniforms {
 @group(1) @binding(0) var<uniform> object: ObjectUniforms;
 
 // What the opaque, background and translucent passes write: HDR color,
-// linear view depth, motion current → previous, instance id + 1.
+// linear view depth, motion current → previous, instance id + 1. Depth and
+// motion are f32 values stored as their bit patterns in integer targets
+// (`targets.rs`): every backend renders R32Uint / Rg32Uint, while OpenGL
+// cannot render R32Float. The readback is bit-identical either way.
 struct GBufferOut {
     @location(0) color: vec4<f32>,
-    @location(1) depth: f32,
-    @location(2) motion: vec2<f32>,
+    @location(1) depth: u32,
+    @location(2) motion: vec2<u32>,
     @location(3) id: u32,
 };
 

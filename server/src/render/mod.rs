@@ -17,7 +17,7 @@
 //! passes; `moving_lights` is data. Positions are camera-relative in `f32`
 //! after `f64` math on the CPU, so huge worlds keep sub-pixel motion.
 
-mod gpu;
+pub mod gpu;
 mod passes;
 mod targets;
 mod uniforms;
@@ -71,9 +71,10 @@ pub fn plan(scene: &Scene) -> Vec<Pass> {
 /// Why rendering failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
-    /// No GPU adapter (install Mesa's lavapipe: `mesa-vulkan-drivers`).
-    #[error("no GPU adapter: {0} (on Debian: apt-get install mesa-vulkan-drivers libvulkan1)")]
-    NoAdapter(String),
+    /// No usable GPU: no adapter, a target format it cannot render, a frame
+    /// too large for it, or an error wgpu reported (never wgpu's panic).
+    #[error(transparent)]
+    Gpu(#[from] gpu_device::GpuError),
     /// Device creation or a device operation failed.
     #[error("GPU device: {0}")]
     Device(String),
@@ -119,11 +120,30 @@ impl Renderer {
     /// Prepares a renderer for `scene` at `size`: GPU, meshes, and the
     /// pipelines of the planned passes only. `base` resolves glTF paths.
     pub fn new(scene: Scene, size: FrameSize, base: &Path) -> Result<Self, RenderError> {
+        Self::check_size(size)?;
+        Self::on(gpu::open()?, scene, size, base)
+    }
+
+    /// [`Renderer::new`] on a device the caller opened
+    /// ([`gpu::on_adapter`]), e.g. on a given backend.
+    pub fn on(gpu: Gpu, scene: Scene, size: FrameSize, base: &Path) -> Result<Self, RenderError> {
+        Self::check_size(size)?;
+        Targets::check(&gpu, (size.width, size.height))?;
+        let scope = gpu.scope("building the renderer");
+        let renderer = Self::build(gpu, scene, size, base)?;
+        scope.finish()?;
+        Ok(renderer)
+    }
+
+    fn check_size(size: FrameSize) -> Result<(), RenderError> {
         let max = protocol::Limits::MAX_DIMENSION;
         if size.width == 0 || size.height == 0 || size.width > max || size.height > max {
             return Err(RenderError::BadSize(size.width, size.height, max));
         }
-        let gpu = Gpu::new()?;
+        Ok(())
+    }
+
+    fn build(gpu: Gpu, scene: Scene, size: FrameSize, base: &Path) -> Result<Self, RenderError> {
         let device = &gpu.device;
         let passes = plan(&scene);
         let layouts = passes::Layouts::new(device);
@@ -331,6 +351,19 @@ impl Renderer {
         prev_t: f64,
         prev_prev_t: f64,
     ) -> Result<Frame, RenderError> {
+        let scope = self.gpu.scope("rendering a frame");
+        let frame = self.render_in_scope(index, t, prev_t, prev_prev_t);
+        scope.finish()?;
+        frame
+    }
+
+    fn render_in_scope(
+        &mut self,
+        index: u64,
+        t: f64,
+        prev_t: f64,
+        prev_prev_t: f64,
+    ) -> Result<Frame, RenderError> {
         let started = Instant::now();
         let state = self.scene.evaluate(t);
         let mut prev = self.scene.evaluate(prev_t);
@@ -361,6 +394,7 @@ impl Renderer {
         camera.window = window;
         prev_camera.window = prev_window;
         if self.targets.size != (size.width, size.height) {
+            Targets::check(&self.gpu, (size.width, size.height))?;
             self.targets = Targets::new(&self.gpu, (size.width, size.height));
         }
         let shadow_from_world = self

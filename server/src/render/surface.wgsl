@@ -143,8 +143,8 @@ fn shade(camrel: vec3<f32>, normal_in: vec3<f32>, uv: vec2<f32>) -> vec3<f32> {
 fn fs_opaque(in: VsOut) -> GBufferOut {
     var out: GBufferOut;
     out.color = vec4<f32>(shade(in.camrel, in.normal, in.uv), 1.0);
-    out.depth = in.view_depth;
-    out.motion = prev_pixel(in.prev_clip) - in.clip.xy;
+    out.depth = bitcast<u32>(in.view_depth);
+    out.motion = bitcast<vec2<u32>>(prev_pixel(in.prev_clip) - in.clip.xy);
     out.id = object.ids.x;
     return out;
 }
@@ -155,8 +155,8 @@ fn fs_opaque(in: VsOut) -> GBufferOut {
 fn fs_translucent(in: VsOut) -> GBufferOut {
     var out: GBufferOut;
     out.color = vec4<f32>(shade(in.camrel, in.normal, in.uv), object.albedo.a);
-    out.depth = in.view_depth;
-    out.motion = vec2<f32>(0.0);
+    out.depth = bitcast<u32>(in.view_depth);
+    out.motion = bitcast<vec2<u32>>(vec2<f32>(0.0));
     out.id = 0u;
     return out;
 }

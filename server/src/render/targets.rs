@@ -6,16 +6,48 @@ use super::{RenderError, gpu::Gpu};
 
 /// HDR linear color.
 pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
-/// Linear view depth (+inf for sky).
-pub const LINEAR_DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
-/// Motion current → previous, pixels.
-pub const MOTION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Float;
+/// Linear view depth (+inf for sky): the `f32`'s bits (`bitcast` in the
+/// shaders). OpenGL cannot render `R32Float`; every backend renders
+/// `R32Uint`, and the bytes read back are the same.
+pub const LINEAR_DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+/// Motion current → previous, pixels, as the two `f32`s' bits.
+pub const MOTION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
 /// Instance id + 1 per pixel (0 = background).
 pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 /// Reversed-Z depth buffer.
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Shadow map.
 pub const SHADOW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// Every format the renderer needs, with what it needs of it, checked on the
+/// adapter before anything is built ([`super::gpu::on_adapter`]).
+pub const REQUIRED_FORMATS: [(
+    wgpu::TextureFormat,
+    wgpu::TextureUsages,
+    wgpu::TextureFormatFeatureFlags,
+    &str,
+); 5] = {
+    use wgpu::TextureFormatFeatureFlags as F;
+    use wgpu::TextureUsages as U;
+    let target = U::RENDER_ATTACHMENT.union(U::COPY_SRC);
+    [
+        (COLOR_FORMAT, target, F::BLENDABLE, "the HDR colour target"),
+        (
+            LINEAR_DEPTH_FORMAT,
+            target,
+            F::empty(),
+            "the linear depth target",
+        ),
+        (MOTION_FORMAT, target, F::empty(), "the motion target"),
+        (ID_FORMAT, target, F::empty(), "the instance id target"),
+        (
+            SHADOW_FORMAT,
+            U::RENDER_ATTACHMENT.union(U::TEXTURE_BINDING),
+            F::empty(),
+            "the shadow map",
+        ),
+    ]
+};
 
 /// The unpacked outputs of one frame.
 pub struct Readback {
@@ -78,7 +110,17 @@ fn padded_row(width: u32, bytes_per_pixel: u32) -> u32 {
 const BPP: [u32; 4] = [8, 4, 8, 4];
 
 impl Targets {
-    /// Allocates targets of `size`.
+    /// Checks that targets of `size` fit the device (texture dimension,
+    /// readback buffer size).
+    pub fn check(gpu: &Gpu, size: (u32, u32)) -> Result<(), RenderError> {
+        let what = format!("a {}x{} frame", size.0, size.1);
+        gpu.require_texture(&what, size.0, size.1)?;
+        let largest = u64::from(padded_row(size.0, 8)) * u64::from(size.1);
+        gpu.require_buffer(&format!("the readback of {what}"), largest, false)?;
+        Ok(())
+    }
+
+    /// Allocates targets of `size` (after [`Targets::check`]).
     pub fn new(gpu: &Gpu, size: (u32, u32)) -> Self {
         let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
         let readback = BPP.map(|bpp| {
