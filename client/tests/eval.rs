@@ -3,7 +3,7 @@
 //! a recorded dump scores exactly like the scene it was rendered from, and
 //! the adaptive-window variants compare against the displayed view.
 
-use client::eval::sequence::Input;
+use client::eval::sequence::{Input, RenderOrigin};
 use client::eval::variant::Sweep;
 use client::eval::{BackendKind, EvalConfig, run};
 use protocol::FrameSize;
@@ -58,6 +58,11 @@ fn methods_on_a_scene_and_on_its_dump() {
     assert!(md.contains("## crossing") && md.contains("★"), "{md}");
     // Per-pass times also in copies of the inputs (the bandwidth floor).
     assert!(md.contains("warp") && md.contains("×)"), "{md}");
+    // And the render of the same frames, with every time as a multiple.
+    assert!(
+        md.contains("rendered in this run") && md.contains("× render"),
+        "{md}"
+    );
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(json["scenes"].as_array().unwrap().len(), 2);
@@ -87,6 +92,18 @@ fn methods_on_a_scene_and_on_its_dump() {
             assert!(t.per_generated_ms > 0.0 && !t.passes.is_empty(), "{t:?}");
         }
         assert_eq!(row.timing.len(), 2);
+        // The render of the same frames, measured in this run, and each
+        // backend's time as a multiple of it.
+        let render = row.render.expect("a render cost");
+        assert_eq!(render.origin, RenderOrigin::ThisRun);
+        assert_eq!(render.frames, 16);
+        assert!(render.ms > 0.0, "{render:?}");
+        for b in [BackendKind::Cpu, BackendKind::Wgpu] {
+            let x = row.render_multiple(b).unwrap();
+            assert!((x * render.ms - row.ms(b).unwrap()).abs() < 1e-9, "{x}");
+        }
+        let d = dumped.rows.iter().find(|r| r.label == row.label).unwrap();
+        assert_eq!(d.render.unwrap().origin, RenderOrigin::Recorded);
         // The backends agree (parity tests: 0 differing pixels here).
         assert!(row.backend_agreement_psnr.unwrap() > 60.0, "{row:?}");
         // The same frames from a dump score the same.

@@ -7,7 +7,9 @@
 //! group has a `copy` entry in the same run: a copy of the bytes a frame's
 //! inputs take (color f32x4 + depth + motion, 28 B/px), a device buffer
 //! copy for wgpu and a host memcpy for the CPU. It is the bandwidth floor:
-//! divide a pass's time by it for the pass's cost in copies.
+//! divide a pass's time by it for the pass's cost in copies. Each group
+//! also has a `render` entry: the renderer drawing the same frames (submit
+//! + readback); divide a method's `total` by it for its cost in renders.
 //!
 //! `cargo bench -p tests --bench framegen [-- FILTER]`, e.g. `-- wgpu/1280x720`;
 //! `FRAMEGEN_BENCH_SIZES=960x540,1280x720,1920x1080` by default.
@@ -160,6 +162,20 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
                 })
             });
         }
+        // The render of the same frames (the default scene at this size,
+        // submit + readback, as `server record` reports it): what a
+        // generated frame must cost a fraction of. In both groups, so that
+        // each group holds its own yardstick from the same run.
+        let scene = server::scene::Scene::load("builtin:default").expect("scene");
+        let mut renderer = server::render::Renderer::new(scene, size, std::path::Path::new("."))
+            .expect("renderer");
+        let mut index = 60;
+        group.bench_function("render", |b| {
+            b.iter(|| {
+                index = 60 + (index - 59) % 16;
+                renderer.render(index, 60.0).expect("render")
+            })
+        });
         group.finish();
     }
 }

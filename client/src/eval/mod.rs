@@ -394,9 +394,14 @@ fn run_group(
         bar.inc(1);
         r += 1;
     }
+    let render = seq.render_cost();
     let rows = runs
         .into_iter()
-        .map(|run| Row::new(run.variant, run.quality.finish(), run.timing, run.agreement))
+        .map(|run| {
+            let mut row = Row::new(run.variant, run.quality.finish(), run.timing, run.agreement);
+            row.render = render;
+            row
+        })
         .collect();
     let mut heat: Vec<_> = heat.into_iter().collect();
     heat.sort_by_key(|(k, _)| *k);

@@ -15,6 +15,7 @@ use framegen::GpuContext;
 use serde::Serialize;
 
 use super::measure::Quality;
+use super::sequence::{RenderCost, RenderOrigin};
 use super::timing::{CopyFloor, Timing, TimingAcc};
 use super::variant::{Axis, Variant, window_name};
 use super::{BackendKind, EvalConfig};
@@ -93,6 +94,8 @@ pub struct Row {
     pub quality: Quality,
     /// Per backend.
     pub timing: Vec<Timing>,
+    /// What rendering one fed frame of this variant's sequence cost.
+    pub render: Option<RenderCost>,
     /// Lowest PSNR between the first backend's output and another's.
     pub backend_agreement_psnr: Option<f64>,
     /// Backends on whose zero-latency front it lies.
@@ -124,6 +127,7 @@ impl Row {
             added_latency_frames: v.added_latency_frames(),
             quality,
             timing: timing.iter().map(TimingAcc::finish).collect(),
+            render: None,
             backend_agreement_psnr: agreement,
             front_zero_latency: Vec::new(),
             front_all: Vec::new(),
@@ -136,6 +140,13 @@ impl Row {
             .iter()
             .find(|t| t.backend == backend)
             .map(|t| t.per_generated_ms)
+    }
+
+    /// Its time on `backend` as a multiple of rendering the frame it is fed
+    /// ([`Row::render`]): frame generation pays off only well below 1.
+    pub fn render_multiple(&self, backend: BackendKind) -> Option<f64> {
+        let render = self.render.filter(|r| r.ms > 0.0)?;
+        Some(self.ms(backend)? / render.ms)
     }
 
     fn front_mark(&self, backend: BackendKind) -> &'static str {
@@ -365,8 +376,11 @@ impl Report {
         for b in &self.backends {
             let _ = write!(md, " mean {} ms |", b.name());
         }
+        for b in &self.backends {
+            let _ = write!(md, " mean {} × render |", b.name());
+        }
         let _ = writeln!(md);
-        let _ = writeln!(md, "|---|{}", "---|".repeat(2 * self.backends.len() + 1));
+        let _ = writeln!(md, "|---|{}", "---|".repeat(3 * self.backends.len() + 1));
         let Some(first) = self.scenes.first() else {
             return;
         };
@@ -392,6 +406,9 @@ impl Report {
             for &b in &self.backends {
                 let _ = write!(md, " {:.2} |", mean(&|r| r.ms(b)));
             }
+            for &b in &self.backends {
+                let _ = write!(md, " {:.2}× |", mean(&|r| r.render_multiple(b)));
+            }
             let _ = writeln!(md);
         }
     }
@@ -403,6 +420,30 @@ impl Report {
             "![ꟻLIP against ms](plots/{}.png)\n",
             plot_name(&scene.scene)
         );
+        // One render cost per group of frames (size and window).
+        let mut renders: Vec<String> = Vec::new();
+        for r in &scene.rows {
+            let Some(c) = r.render else { continue };
+            let origin = match c.origin {
+                RenderOrigin::ThisRun => "rendered in this run",
+                RenderOrigin::Recorded => "as recorded in the dump",
+            };
+            let text = format!(
+                "{:.2} ms at {} window {} ({origin}, median of {} frames)",
+                c.ms, r.size, r.window, c.frames
+            );
+            if !renders.contains(&text) {
+                renders.push(text);
+            }
+        }
+        if !renders.is_empty() {
+            let _ = writeln!(
+                md,
+                "Rendering one fed frame: {}. Each backend's ms per generated frame is followed by that \
+                 time as a multiple of the render of the same frames.\n",
+                renders.join("; ")
+            );
+        }
         let _ = write!(
             md,
             "| variant | size | PSNR | SSIM | ꟻLIP | disoccluded % / ꟻLIP | dynamic % / ꟻLIP | static ꟻLIP | bg / filled % |"
@@ -450,11 +491,12 @@ impl Report {
                 100.0 * q.sources.filled,
             );
             for &b in &self.backends {
-                let _ = write!(
-                    md,
-                    " {} |",
-                    r.ms(b).map_or("—".into(), |v| format!("{v:.2}"))
-                );
+                let ms = match (r.ms(b), r.render_multiple(b)) {
+                    (Some(v), Some(x)) => format!("{v:.2} ({x:.2}×)"),
+                    (Some(v), None) => format!("{v:.2}"),
+                    _ => "—".into(),
+                };
+                let _ = write!(md, " {ms} |");
             }
             let marks: Vec<String> = self
                 .backends

@@ -54,6 +54,8 @@ pub struct Sequence {
     next: u64,
     end: u64,
     fps: f64,
+    /// Render time of every fed frame, ms (`FrameMeta::host_processing`).
+    render_ms: Vec<f64>,
 }
 
 enum Source {
@@ -103,6 +105,7 @@ impl Sequence {
                     next: start,
                     end: start + count,
                     fps,
+                    render_ms: Vec::new(),
                 })
             }
             Input::Dump(dir) => {
@@ -119,6 +122,7 @@ impl Sequence {
                     next: start,
                     end: (start + count).min(len),
                     fps,
+                    render_ms: Vec::new(),
                 })
             }
         }
@@ -137,6 +141,21 @@ impl Sequence {
     /// The display rate (frames per second of the sequence).
     pub fn fps(&self) -> f64 {
         self.fps
+    }
+
+    /// What rendering one fed frame cost: the median of the frames yielded
+    /// so far, measured in this run for scenes (submit + readback, as
+    /// `server record` reports it), or as recorded in the dump. `None`
+    /// before the first step.
+    pub fn render_cost(&self) -> Option<RenderCost> {
+        (!self.render_ms.is_empty()).then(|| RenderCost {
+            ms: super::timing::median(&self.render_ms),
+            frames: self.render_ms.len(),
+            origin: match self.source {
+                Source::Rendered { .. } => RenderOrigin::ThisRun,
+                Source::Dump(_) => RenderOrigin::Recorded,
+            },
+        })
     }
 
     /// The next step, `None` at the end.
@@ -174,6 +193,31 @@ impl Sequence {
                 }
             }
         };
+        self.render_ms
+            .push(step.fed.meta.host_processing.as_secs_f64() * 1e3);
         Ok(Some(step))
     }
+}
+
+/// Where a [`RenderCost`] comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RenderOrigin {
+    /// Rendered by this `eval` run, on this machine, beside the variants.
+    ThisRun,
+    /// The `host_processing` a dump recorded (another run, maybe another
+    /// machine): a ratio against it is indicative only.
+    Recorded,
+}
+
+/// The cost of rendering one fed frame of a sequence: what frame
+/// generation has to be a fraction of.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct RenderCost {
+    /// Median ms per frame.
+    pub ms: f64,
+    /// Frames measured.
+    pub frames: usize,
+    /// Where the number comes from.
+    pub origin: RenderOrigin,
 }
