@@ -72,7 +72,7 @@ struct RunArgs {
     /// Where frames are generated: `wgpu`, `cpu` (the reference), or
     /// `auto`: wgpu on a hardware adapter, the CPU reference when the only
     /// adapter is a software rasteriser (lavapipe shares the CPU with the
-    /// in-process server's renderer, and the single-threaded reference is
+    /// in-process server's renderer, and the reference, on all cores, is
     /// faster there; see the README).
     #[arg(long, default_value = "auto", value_parser = ["auto", "wgpu", "cpu"])]
     backend: String,

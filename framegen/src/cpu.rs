@@ -2,6 +2,7 @@
 //! order. Slow, simple, and the yardstick the wgpu backend is tested
 //! against.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use crate::FramegenError;
@@ -18,7 +19,7 @@ use crate::splat;
 #[derive(Clone, Debug)]
 struct FrameState {
     camera: crate::camera::PassCamera,
-    frame: Prepared,
+    frame: Arc<Prepared>,
     history: history::History,
     k: u32,
     levels: Levels,
@@ -46,7 +47,7 @@ fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T
 }
 
 impl Backend for CpuBackend {
-    fn ingest(&mut self, frame: &Prepared, plan: &IngestPlan) -> Result<u32, FramegenError> {
+    fn ingest(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<u32, FramegenError> {
         self.timings.clear();
         let t = &mut self.timings;
         let prev = if plan.prev.is_some() {

@@ -210,8 +210,10 @@ pub struct Job {
 /// Runs the passes.
 pub trait Backend: Send {
     /// Takes a sanitised rendered frame: history tracking and background
-    /// collection. Returns the number of dynamic pixels.
-    fn ingest(&mut self, frame: &Prepared, plan: &IngestPlan) -> Result<u32, FramegenError>;
+    /// collection. Returns the number of dynamic pixels. The frame is
+    /// shared, so a backend that keeps it (the CPU reference) copies
+    /// nothing.
+    fn ingest(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<u32, FramegenError>;
     /// Runs the generation passes for `job` on the last ingested frame.
     fn generate(&mut self, job: &Job) -> Result<Output, FramegenError>;
     /// Drops all history.
@@ -346,7 +348,7 @@ impl FrameGenerator {
             }
             Some(_) => None,
         };
-        let prepared = prepare(frame);
+        let prepared = Arc::new(prepare(frame));
         self.sanitized.color += prepared.sanitized.color;
         self.sanitized.depth += prepared.sanitized.depth;
         self.sanitized.motion += prepared.sanitized.motion;
@@ -539,10 +541,11 @@ fn displayed_region(meta: &FrameMeta, display_size: Option<(u32, u32)>) -> ((u32
 
 /// Turns the passes' output into a [`Generated`].
 fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
+    use rayon::prelude::*;
     let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
     let color = out
         .color
-        .iter()
+        .par_iter()
         .map(|c| {
             let ch = |v: f32| f16::from_f32(finite(v).clamp(0.0, crate::input::MAX_RADIANCE));
             [ch(c[0]), ch(c[1]), ch(c[2]), f16::ONE]
@@ -550,13 +553,13 @@ fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
         .collect();
     let depth = out
         .depth
-        .iter()
+        .par_iter()
         .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
         .collect();
-    let motion = out.motion.iter().map(|m| m.map(finite)).collect();
+    let motion = out.motion.par_iter().map(|m| m.map(finite)).collect();
     let mask = out
         .mask
-        .iter()
+        .par_iter()
         .map(|&m| PixelSource::from_mask(m))
         .collect();
     let frame = Frame {

@@ -51,18 +51,32 @@ pub struct Prepared {
 
 /// Converts and sanitises a frame's buffers.
 pub fn prepare(frame: &Frame) -> Prepared {
-    let mut s = Sanitized::default();
+    use rayon::prelude::*;
+    // On all cores: each value is replaced on its own and the replacements
+    // are counted as integers, so the result does not depend on threads.
+    let bad = |v: f32| u64::from(!v.is_finite());
+    let s = Sanitized {
+        color: frame
+            .color
+            .par_iter()
+            .map(|c| c.iter().take(3).map(|v| bad(v.to_f32())).sum::<u64>())
+            .sum(),
+        depth: frame
+            .depth
+            .par_iter()
+            .filter(|&&d| d.is_nan() || d <= 0.0)
+            .count() as u64,
+        motion: frame.motion.par_iter().map(|m| bad(m[0]) + bad(m[1])).sum(),
+    };
     let color = frame
         .color
-        .iter()
+        .par_iter()
         .map(|c| {
             let mut out = [0.0, 0.0, 0.0, 1.0];
             for (o, v) in out.iter_mut().zip(c.iter().take(3)) {
                 let v = v.to_f32();
                 if v.is_finite() {
                     *o = v.clamp(0.0, MAX_RADIANCE);
-                } else {
-                    s.color += 1;
                 }
             }
             out
@@ -70,32 +84,24 @@ pub fn prepare(frame: &Frame) -> Prepared {
         .collect();
     let depth: Vec<f32> = frame
         .depth
-        .iter()
-        .map(|&d| {
-            if d > 0.0 {
-                d
-            } else {
-                s.depth += 1;
-                0.0
-            }
-        })
+        .par_iter()
+        .map(|&d| if d > 0.0 { d } else { 0.0 })
         .collect();
     let limit = 4.0 * frame.meta.size.width.max(frame.meta.size.height) as f32;
     let motion = frame
         .motion
-        .iter()
+        .par_iter()
         .map(|m| {
             m.map(|v| {
                 if v.is_finite() {
                     v.clamp(-limit, limit)
                 } else {
-                    s.motion += 1;
                     0.0
                 }
             })
         })
         .collect();
-    let valid = depth.iter().filter(|&&d| d > 0.0).count() as u64;
+    let valid = depth.len() as u64 - s.depth;
     Prepared {
         color,
         depth,

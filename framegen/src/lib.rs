@@ -20,6 +20,7 @@ pub mod interp;
 pub mod levels;
 pub mod metrics;
 pub mod output;
+mod par;
 pub mod sample;
 pub mod schedule;
 pub mod settings;

@@ -83,4 +83,40 @@ impl Output {
     pub fn count(&self, mask: u32) -> usize {
         self.mask.iter().filter(|&&m| m == mask).count()
     }
+
+    /// Every pixel with its index, for a CPU pass that writes each pixel
+    /// from its own task on all cores (rayon; the result does not depend on
+    /// the thread count).
+    pub fn par_pixels_mut(
+        &mut self,
+    ) -> impl rayon::iter::IndexedParallelIterator<Item = (usize, PixelMut<'_>)> {
+        use rayon::prelude::*;
+        (
+            &mut self.color,
+            &mut self.depth,
+            &mut self.motion,
+            &mut self.mask,
+        )
+            .into_par_iter()
+            .map(|(color, depth, motion, mask)| PixelMut {
+                color,
+                depth,
+                motion,
+                mask,
+            })
+            .enumerate()
+    }
+}
+
+/// One pixel of an [`Output`], writable ([`Output::par_pixels_mut`]).
+#[derive(Debug)]
+pub struct PixelMut<'a> {
+    /// Linear RGB, alpha.
+    pub color: &'a mut [f32; 4],
+    /// Linear view depth.
+    pub depth: &'a mut f32,
+    /// Motion to the rendered frame, displayed pixels.
+    pub motion: &'a mut [f32; 2],
+    /// Where it came from.
+    pub mask: &'a mut u32,
 }

@@ -73,20 +73,29 @@ impl Winners {
 }
 
 /// CPU reference of the two splat kernels.
+///
+/// Runs on all cores with atomic maxima, as the kernels do: a maximum does
+/// not depend on the order it is taken in, so the winners are the same for
+/// any thread count.
 pub fn resolve(candidates: &[Candidate], slots: usize) -> Winners {
-    let mut keys = vec![0u32; slots];
-    for c in candidates {
-        if let Some(k) = keys.get_mut(c.slot as usize) {
-            *k = (*k).max(c.key);
+    use rayon::prelude::*;
+    use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+    let zeroed = || (0..slots).map(|_| AtomicU32::new(0)).collect::<Vec<_>>();
+    let keys = zeroed();
+    candidates.par_iter().for_each(|c| {
+        if let Some(k) = keys.get(c.slot as usize) {
+            k.fetch_max(c.key, Relaxed);
         }
-    }
-    let mut stored = vec![0u32; slots];
-    for (i, c) in candidates.iter().enumerate() {
+    });
+    let keys: Vec<u32> = keys.into_iter().map(AtomicU32::into_inner).collect();
+    let stored = zeroed();
+    candidates.par_iter().enumerate().for_each(|(i, c)| {
         let slot = c.slot as usize;
         if slot < slots && keys[slot] == c.key {
-            stored[slot] = stored[slot].max(!(i as u32));
+            stored[slot].fetch_max(!(i as u32), Relaxed);
         }
-    }
+    });
+    let stored = stored.into_iter().map(AtomicU32::into_inner).collect();
     Winners { keys, stored }
 }
 

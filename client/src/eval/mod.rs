@@ -47,7 +47,7 @@ use variant::{Axis, Sweep, Variant};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum BackendKind {
-    /// The plain Rust reference, single-threaded.
+    /// The plain Rust reference, on all cores (rayon).
     Cpu,
     /// wgpu compute.
     Wgpu,

@@ -8,7 +8,7 @@
 //! for real work (DEVELOPERS.md), it is the submit + wait wall time. The
 //! report labels which. Totals (push, generate) are always wall time and
 //! include one synchronisation per pass. The CPU reference is
-//! single-threaded wall time.
+//! wall time on all cores (rayon; `RAYON_NUM_THREADS` sets how many).
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -23,7 +23,7 @@ use super::BackendKind;
 /// How the numbers of a backend were taken.
 pub fn method_of(backend: BackendKind, timestamps: bool) -> &'static str {
     match (backend, timestamps) {
-        (BackendKind::Cpu, _) => "wall time, single-threaded CPU reference",
+        (BackendKind::Cpu, _) => "wall time, CPU reference on all cores (rayon)",
         (BackendKind::Wgpu, false) => {
             "per pass: wall time of submit + wait (profiled; the adapter's timestamps are not used); totals: wall time"
         }

@@ -72,15 +72,19 @@ pub fn init(p0: &[[f32; 4]], track: &[u32], color: &[[f32; 4]], levels: Levels) 
     if levels.count == 0 {
         return bg;
     }
-    for (x, slot) in bg.iter_mut().take(levels.len(0) as usize).enumerate() {
-        if !is_dynamic(track[x]) && is_confirmed(track[x]) && p0[x][3] != W_INVALID {
-            let c = color[x];
-            *slot = Texel {
-                pos: p0[x],
-                color: [c[0], c[1], c[2], 1.0],
-            };
-        }
-    }
+    use rayon::prelude::*;
+    bg[..levels.len(0) as usize]
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(x, slot)| {
+            if !is_dynamic(track[x]) && is_confirmed(track[x]) && p0[x][3] != W_INVALID {
+                let c = color[x];
+                *slot = Texel {
+                    pos: p0[x],
+                    color: [c[0], c[1], c[2], 1.0],
+                };
+            }
+        });
     bg
 }
 
@@ -138,25 +142,29 @@ pub fn collect(
     let Some(prev) = prev.filter(|p| p.levels.count == levels.count) else {
         return bg;
     };
+    use rayon::prelude::*;
     let shift = Vec3::from_slice(&prev.camera.eye[..3]);
     for l in 0..levels.count {
         let start = prev.levels.offset(l) as usize;
         let source = &prev.texels[start..start + prev.levels.len(l) as usize];
         let cands: Vec<Candidate> = source
-            .iter()
+            .par_iter()
             .map(|t| candidate(t, shift, camera, &bg, levels, l, tolerance))
             .collect();
         let winners = splat::resolve(&cands, bg.len());
-        let end = levels.offset((l + 2).min(levels.count));
-        for s in levels.offset(l)..end {
-            if let Some(i) = winners.winner(s as usize) {
-                let t = source[i];
-                bg[s as usize] = Texel {
-                    pos: rebase(t.pos, shift),
-                    color: t.color,
-                };
-            }
-        }
+        let (begin, end) = (levels.offset(l), levels.offset((l + 2).min(levels.count)));
+        bg[begin as usize..end as usize]
+            .par_iter_mut()
+            .zip(begin..end)
+            .for_each(|(texel, s)| {
+                if let Some(i) = winners.winner(s as usize) {
+                    let t = source[i];
+                    *texel = Texel {
+                        pos: rebase(t.pos, shift),
+                        color: t.color,
+                    };
+                }
+            });
     }
     bg
 }

@@ -27,7 +27,8 @@ pub fn project(
     camera: &PassCamera,
     target: Levels,
 ) -> Vec<Candidate> {
-    bg.iter()
+    use rayon::prelude::*;
+    bg.par_iter()
         .enumerate()
         .map(|(i, t)| {
             if !t.is_valid() {
@@ -58,11 +59,13 @@ pub fn resolve(
     map: DisplayMap,
     out: &mut Output,
 ) {
-    for t in 0..out.mask.len() {
-        if out.mask[t] != EMPTY {
-            continue;
+    use rayon::prelude::*;
+    let width = out.width;
+    out.par_pixels_mut().for_each(|(t, px)| {
+        if *px.mask != EMPTY {
+            return;
         }
-        let center = pixel_center(t, out.width);
+        let center = pixel_center(t, width);
         let mut best: Option<(f32, usize)> = None;
         for l in 0..target.count {
             let (w, h) = target.size(l);
@@ -77,7 +80,7 @@ pub fn resolve(
             }
         }
         let Some((d, i)) = best else {
-            continue;
+            return;
         };
         let texel = bg[i];
         let c = texel.color;
@@ -85,11 +88,11 @@ pub fn resolve(
             .project(texel.pos)
             .map(|r| map.apply(r.pixel) - center)
             .unwrap_or(Vec2::ZERO);
-        out.color[t] = [c[0], c[1], c[2], 1.0];
-        out.depth[t] = d;
-        out.motion[t] = motion.to_array();
-        out.mask[t] = BACKGROUND;
-    }
+        *px.color = [c[0], c[1], c[2], 1.0];
+        *px.depth = d;
+        *px.motion = motion.to_array();
+        *px.mask = BACKGROUND;
+    });
 }
 
 #[repr(C)]

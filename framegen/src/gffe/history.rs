@@ -76,9 +76,11 @@ pub fn chain(track: u32) -> u32 {
     track >> 2
 }
 
-#[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
 /// CPU reference of Algorithm 1. `camera` is `C_t` with its centre at the
 /// origin; `k ≥ 1`; `epsilon` in pixels; `tolerance` relative depth.
+///
+/// Runs on all cores: pixels are independent, so bands of rows are tracked
+/// in parallel and the result is the same for any thread count.
 pub fn track(
     camera: &PassCamera,
     depth: &[f32],
@@ -88,23 +90,98 @@ pub fn track(
     epsilon: f32,
     tolerance: f32,
 ) -> History {
+    use rayon::prelude::*;
     let n = depth.len();
     let k = (k as usize).clamp(1, MAX_HISTORY);
-    let width = camera.width();
     let invalid = [0.0, 0.0, 0.0, W_INVALID];
     let mut positions = vec![invalid; k * n];
     let mut track_words = vec![0u32; n];
-    let mut dynamic = 0;
-    for x in 0..n {
+    // Bands of rows; each band gets its slice of every plane.
+    let band = crate::par::band(camera.width() as usize, n);
+    let mut planes: Vec<_> = positions
+        .chunks_mut(n.max(1))
+        .map(|p| p.chunks_mut(band))
+        .collect();
+    let bands: Vec<Band<'_>> = track_words
+        .chunks_mut(band)
+        .enumerate()
+        .map(|(b, words)| {
+            let slices = planes.iter_mut().filter_map(Iterator::next).collect();
+            (b * band, slices, words)
+        })
+        .collect();
+    let pixel = Pixel {
+        camera,
+        depth,
+        motion,
+        prev: prev.as_ref(),
+        k,
+        epsilon,
+        tolerance,
+    };
+    let dynamic = bands
+        .into_par_iter()
+        .map(|(start, mut planes, words)| {
+            let mut dynamic = 0;
+            for (o, word) in words.iter_mut().enumerate() {
+                let Some((entries, w)) = pixel.track(start + o) else {
+                    continue;
+                };
+                for (plane, e) in planes.iter_mut().zip(entries) {
+                    plane[o] = e;
+                }
+                *word = w;
+                dynamic += u32::from(is_dynamic(w));
+            }
+            dynamic
+        })
+        .sum();
+    History {
+        positions,
+        track: track_words,
+        dynamic,
+    }
+}
+
+/// A band of rows for one task: its first pixel, its slice of every plane,
+/// its track words.
+type Band<'a> = (usize, Vec<&'a mut [[f32; 4]]>, &'a mut [u32]);
+
+/// What Algorithm 1 reads for every pixel.
+struct Pixel<'a> {
+    camera: &'a PassCamera,
+    depth: &'a [f32],
+    motion: &'a [[f32; 2]],
+    prev: Option<&'a PrevHistory<'a>>,
+    k: usize,
+    epsilon: f32,
+    tolerance: f32,
+}
+
+impl Pixel<'_> {
+    /// Pixel `x`'s positions `P_0..P_{k−1}` and track word; `None` for an
+    /// invalid depth (no position at all).
+    #[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
+    fn track(&self, x: usize) -> Option<([[f32; 4]; MAX_HISTORY], u32)> {
+        let Self {
+            camera,
+            depth,
+            motion,
+            k,
+            epsilon,
+            tolerance,
+            ..
+        } = *self;
+        let width = camera.width();
         let d = depth[x];
         if d.is_nan() || d <= 0.0 {
-            continue;
+            return None;
         }
         let center = pixel_center(x, width);
         let p = camera.unproject(center, d);
         let mut entries = [p; MAX_HISTORY];
         let mut word = ((k - 1) as u32) << 2;
-        if let Some(prev) = &prev {
+        if let Some(prev) = self.prev {
             let target = center + Vec2::from_array(motion[x]);
             let reprojected = prev.camera.project(p);
             let is_static = reprojected.is_some_and(|r| {
@@ -128,7 +205,6 @@ pub fn track(
                 }
             }
             if !is_static {
-                dynamic += 1;
                 let prev_n = prev.track.len();
                 let mut len = 0usize;
                 if let Some(j) = found {
@@ -154,15 +230,7 @@ pub fn track(
                 word = 1 | (len as u32) << 2;
             }
         }
-        for (i, e) in entries.iter().take(k).enumerate() {
-            positions[i * n + x] = *e;
-        }
-        track_words[x] = word;
-    }
-    History {
-        positions,
-        track: track_words,
-        dynamic,
+        Some((entries, word))
     }
 }
 

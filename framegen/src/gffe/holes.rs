@@ -40,72 +40,84 @@ pub fn layout(width: u32, height: u32, levels: u32) -> Levels {
 }
 
 /// CPU reference of `pp_init`.
-#[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
 pub fn init(out: &Output, pyramid: &mut [Texel]) {
-    for t in 0..out.mask.len() {
-        pyramid[t] = if out.mask[t] == EMPTY {
-            Texel::default()
-        } else {
-            let c = out.color[t];
-            let m = out.motion[t];
-            Texel {
-                a: [c[0], c[1], c[2], 1.0],
-                b: [1.0 / out.depth[t], m[0], m[1], 0.0],
-            }
-        };
+    use rayon::prelude::*;
+    let n = out.mask.len();
+    pyramid[..n]
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(t, texel)| *texel = init_texel(out, t));
+}
+
+/// Level 0's texel of pixel `t`: the pixel with weight 1 where it was
+/// written, empty (weight 0) in a hole.
+fn init_texel(out: &Output, t: usize) -> Texel {
+    if out.mask[t] == EMPTY {
+        Texel::default()
+    } else {
+        let c = out.color[t];
+        let m = out.motion[t];
+        Texel {
+            a: [c[0], c[1], c[2], 1.0],
+            b: [1.0 / out.depth[t], m[0], m[1], 0.0],
+        }
     }
 }
 
 /// CPU reference of `pp_pull` from level `k` to `k + 1`.
 pub fn pull(pyramid: &mut [Texel], levels: Levels, k: u32) {
+    use rayon::prelude::*;
     let (sw, sh) = levels.size(k);
     let (dw, dh) = levels.size(k + 1);
     let (so, d_o) = (levels.offset(k) as usize, levels.offset(k + 1) as usize);
-    for y in 0..dh {
-        for x in 0..dw {
-            let mut sum_w = 0.0f32;
-            let mut sa = Vec4::ZERO;
-            let mut sb = Vec4::ZERO;
-            for dy in 0..2 {
-                for dx in 0..2 {
-                    let (cx, cy) = (2 * x + dx, 2 * y + dy);
-                    if cx < sw && cy < sh {
-                        let c = pyramid[so + (cy * sw + cx) as usize];
-                        let w = c.a[3];
-                        sum_w += w;
-                        sa += Vec4::from_array(c.a) * w;
-                        sb += Vec4::from_array(c.b) * w;
+    let (below, above) = pyramid.split_at_mut(d_o);
+    let src = &below[so..];
+    above[..(dw * dh) as usize]
+        .par_chunks_mut(dw as usize)
+        .enumerate()
+        .for_each(|(y, row)| {
+            let y = y as u32;
+            for (x, texel) in (0u32..).zip(row.iter_mut()) {
+                let mut sum_w = 0.0f32;
+                let mut sa = Vec4::ZERO;
+                let mut sb = Vec4::ZERO;
+                for dy in 0..2 {
+                    for dx in 0..2 {
+                        let (cx, cy) = (2 * x + dx, 2 * y + dy);
+                        if cx < sw && cy < sh {
+                            let c = src[(cy * sw + cx) as usize];
+                            let w = c.a[3];
+                            sum_w += w;
+                            sa += Vec4::from_array(c.a) * w;
+                            sb += Vec4::from_array(c.b) * w;
+                        }
                     }
                 }
+                *texel = if sum_w > 0.0 {
+                    let a = sa / sum_w;
+                    Texel {
+                        a: [a.x, a.y, a.z, sum_w.min(1.0)],
+                        b: (sb / sum_w).to_array(),
+                    }
+                } else {
+                    Texel::default()
+                };
             }
-            let t = if sum_w > 0.0 {
-                let a = sa / sum_w;
-                Texel {
-                    a: [a.x, a.y, a.z, sum_w.min(1.0)],
-                    b: (sb / sum_w).to_array(),
-                }
-            } else {
-                Texel::default()
-            };
-            pyramid[d_o + (y * dw + x) as usize] = t;
-        }
-    }
+        });
 }
 
-/// Weighted bilinear sample of level `k` at level-`k` continuous position
-/// `p`: each tap counts with its bilinear weight times its own weight, so
+/// Weighted bilinear sample of one level (its texels and size) at the
+/// level's continuous position `p`: each tap counts with its bilinear weight times its own weight, so
 /// empty texels do not drag the value toward zero; the returned weight is
 /// the bilinear blend of the taps' weights.
-fn sample(pyramid: &[Texel], levels: Levels, k: u32, p: Vec2) -> (Vec4, Vec4) {
-    let (w, h) = levels.size(k);
-    let o = levels.offset(k) as usize;
+fn sample(level: &[Texel], (w, h): (u32, u32), p: Vec2) -> (Vec4, Vec4) {
     let q = p - 0.5;
     let base = q.floor();
     let f = q - base;
     let at = |x: f32, y: f32| {
         let xi = (x.max(0.0) as u32).min(w - 1);
         let yi = (y.max(0.0) as u32).min(h - 1);
-        let t = pyramid[o + (yi * w + xi) as usize];
+        let t = level[(yi * w + xi) as usize];
         (Vec4::from_array(t.a), Vec4::from_array(t.b))
     };
     let taps = [
@@ -131,36 +143,42 @@ fn sample(pyramid: &[Texel], levels: Levels, k: u32, p: Vec2) -> (Vec4, Vec4) {
 
 /// CPU reference of `pp_push` from level `k + 1` into level `k`.
 pub fn push(pyramid: &mut [Texel], levels: Levels, k: u32) {
+    use rayon::prelude::*;
     let (w, h) = levels.size(k);
     let o = levels.offset(k) as usize;
-    for y in 0..h {
-        for x in 0..w {
-            let i = o + (y * w + x) as usize;
-            let own = pyramid[i];
-            let wgt = own.a[3];
-            if wgt >= 1.0 {
-                continue;
+    let (below, above) = pyramid.split_at_mut(levels.offset(k + 1) as usize);
+    let coarse = &above[..levels.len(k + 1) as usize];
+    let coarse_size = levels.size(k + 1);
+    below[o..o + (w * h) as usize]
+        .par_chunks_mut(w as usize)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, texel) in row.iter_mut().enumerate() {
+                let own = *texel;
+                let wgt = own.a[3];
+                if wgt >= 1.0 {
+                    continue;
+                }
+                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) * 0.5;
+                let (pa, pb) = sample(coarse, coarse_size, p);
+                let oa = Vec4::from_array(own.a);
+                let ob = Vec4::from_array(own.b);
+                let a = oa * wgt + pa * (1.0 - wgt);
+                let b = ob * wgt + pb * (1.0 - wgt);
+                *texel = Texel {
+                    a: [a.x, a.y, a.z, wgt + (1.0 - wgt) * pa.w],
+                    b: b.to_array(),
+                };
             }
-            let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) * 0.5;
-            let (pa, pb) = sample(pyramid, levels, k + 1, p);
-            let oa = Vec4::from_array(own.a);
-            let ob = Vec4::from_array(own.b);
-            let a = oa * wgt + pa * (1.0 - wgt);
-            let b = ob * wgt + pb * (1.0 - wgt);
-            pyramid[i] = Texel {
-                a: [a.x, a.y, a.z, wgt + (1.0 - wgt) * pa.w],
-                b: b.to_array(),
-            };
-        }
-    }
+        });
 }
 
 /// CPU reference of `pp_resolve`.
-#[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
 pub fn resolve(pyramid: &[Texel], out: &mut Output) {
-    for t in 0..out.mask.len() {
-        if out.mask[t] != EMPTY {
-            continue;
+    use rayon::prelude::*;
+    out.par_pixels_mut().for_each(|(t, px)| {
+        if *px.mask != EMPTY {
+            return;
         }
         let p = pyramid[t];
         let (color, inv_depth, motion) = if p.a[3] > 0.0 {
@@ -168,22 +186,28 @@ pub fn resolve(pyramid: &[Texel], out: &mut Output) {
         } else {
             ([0.0; 4], 0.0, [0.0; 2])
         };
-        out.color[t] = [color[0], color[1], color[2], 1.0];
-        out.depth[t] = if inv_depth > 0.0 {
+        *px.color = [color[0], color[1], color[2], 1.0];
+        *px.depth = if inv_depth > 0.0 {
             1.0 / inv_depth
         } else {
             f32::INFINITY
         };
-        out.motion[t] = motion;
-        out.mask[t] = FILLED;
-    }
+        *px.motion = motion;
+        *px.mask = FILLED;
+    });
 }
 
 /// The whole CPU reference: fills every hole of `out`.
 pub fn fill(out: &mut Output, levels: u32) {
+    use rayon::prelude::*;
     let layout = layout(out.width, out.height, levels);
-    let mut pyramid = vec![Texel::default(); layout.total() as usize];
-    init(out, &mut pyramid);
+    // Level 0 built in parallel (what `init` writes), the coarser levels
+    // after it (every texel of them is written by `pull`).
+    let mut pyramid: Vec<Texel> = (0..out.mask.len())
+        .into_par_iter()
+        .map(|t| init_texel(out, t))
+        .collect();
+    pyramid.resize(layout.total() as usize, Texel::default());
     for k in 0..layout.count - 1 {
         pull(&mut pyramid, layout, k);
     }

@@ -13,7 +13,7 @@
 use glam::Vec3;
 
 use crate::camera::W_POINT;
-use crate::gffe::history::{chain, is_dynamic};
+use crate::gffe::history::{MAX_HISTORY, chain, is_dynamic};
 use crate::gpu::{Binding, GpuContext, Kernel};
 
 /// Eq. 1 for one pixel. `planes` are `P_0..P_{k−1}` of the pixel.
@@ -37,14 +37,17 @@ pub fn estimate_pixel(planes: &[[f32; 4]], track: u32, alpha: f32) -> [f32; 4] {
 /// CPU reference: next positions of every pixel. `positions` holds `k`
 /// planes of `n` pixels.
 pub fn estimate(positions: &[[f32; 4]], track: &[u32], k: u32, alpha: f32) -> Vec<[f32; 4]> {
+    use rayon::prelude::*;
     let n = track.len();
-    let k = k.max(1) as usize;
-    let mut planes = Vec::with_capacity(k);
+    let k = (k.max(1) as usize).min(MAX_HISTORY);
     (0..n)
+        .into_par_iter()
         .map(|x| {
-            planes.clear();
-            planes.extend((0..k).map(|i| positions[i * n + x]));
-            estimate_pixel(&planes, track[x], alpha)
+            let mut planes = [[0.0; 4]; MAX_HISTORY];
+            for (i, p) in planes.iter_mut().take(k).enumerate() {
+                *p = positions[i * n + x];
+            }
+            estimate_pixel(&planes[..k], track[x], alpha)
         })
         .collect()
 }

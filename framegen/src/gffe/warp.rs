@@ -26,7 +26,8 @@ use crate::splat::{Candidate, Winners, depth_key};
 /// CPU reference of `warp_project`: one candidate per source pixel.
 /// `next` and `target` are relative to the same origin.
 pub fn project(next: &[[f32; 4]], target: &PassCamera) -> Vec<Candidate> {
-    next.iter()
+    use rayon::prelude::*;
+    next.par_iter()
         .map(|&p| {
             target
                 .project(p)
@@ -49,18 +50,20 @@ pub fn resolve(
     map: DisplayMap,
     out: &mut Output,
 ) {
-    for t in 0..out.mask.len() {
+    use rayon::prelude::*;
+    let width = out.width;
+    out.par_pixels_mut().for_each(|(t, px)| {
         let Some(i) = winners.winner(t) else {
-            continue;
+            return;
         };
-        let center = pixel_center(t, out.width);
+        let center = pixel_center(t, width);
         let source = map.apply(pixel_center(i, source_width));
         let c = color[i];
-        out.color[t] = [c[0], c[1], c[2], 1.0];
-        out.depth[t] = winners.depth(t).unwrap_or(f32::INFINITY);
-        out.motion[t] = (source - center).to_array();
-        out.mask[t] = WARPED;
-    }
+        *px.color = [c[0], c[1], c[2], 1.0];
+        *px.depth = winners.depth(t).unwrap_or(f32::INFINITY);
+        *px.motion = (source - center).to_array();
+        *px.mask = WARPED;
+    });
 }
 
 /// Largest ratio between the depths of a crack's two neighbours.
@@ -76,39 +79,47 @@ const PAIRS: [[(i32, i32); 2]; 4] = [
 
 /// CPU reference of `warp_cracks`.
 pub fn close_cracks(out: &mut Output) {
+    use rayon::prelude::*;
     let (w, h) = (out.width as i32, out.height as i32);
-    let before = out.mask.clone();
-    for t in 0..before.len() {
-        if before[t] != EMPTY {
-            continue;
-        }
-        let (x, y) = ((t as i32) % w, (t as i32) / w);
-        for pair in PAIRS {
-            let [a, b] = pair.map(|(dx, dy)| {
-                let (nx, ny) = (x + dx, y + dy);
-                (nx >= 0 && ny >= 0 && nx < w && ny < h).then(|| (ny * w + nx) as usize)
-            });
-            let (Some(a), Some(b)) = (a, b) else { continue };
-            if before[a] != WARPED || before[b] != WARPED {
-                continue;
-            }
-            let (da, db) = (out.depth[a], out.depth[b]);
-            if da.max(db) > da.min(db) * CRACK_DEPTH_RATIO {
-                continue;
-            }
-            let (ca, cb) = (out.color[a], out.color[b]);
-            let (ma, mb) = (out.motion[a], out.motion[b]);
-            out.color[t] = [
-                (ca[0] + cb[0]) * 0.5,
-                (ca[1] + cb[1]) * 0.5,
-                (ca[2] + cb[2]) * 0.5,
-                1.0,
-            ];
-            out.depth[t] = (da + db) * 0.5;
-            out.motion[t] = [(ma[0] + mb[0]) * 0.5, (ma[1] + mb[1]) * 0.5];
-            out.mask[t] = CRACK;
-            break;
-        }
+    let read = &*out;
+    // Cracks are few: find them in parallel (reading only pixels that
+    // were warped before, never one being written), then write them.
+    let fixes: Vec<(usize, [f32; 4], f32, [f32; 2])> = (0..read.mask.len())
+        .into_par_iter()
+        .filter(|&t| read.mask[t] == EMPTY)
+        .filter_map(|t| {
+            let (x, y) = ((t as i32) % w, (t as i32) / w);
+            PAIRS.iter().find_map(|pair| {
+                let [a, b] = pair.map(|(dx, dy)| {
+                    let (nx, ny) = (x + dx, y + dy);
+                    (nx >= 0 && ny >= 0 && nx < w && ny < h).then(|| (ny * w + nx) as usize)
+                });
+                let (a, b) = (a?, b?);
+                if read.mask[a] != WARPED || read.mask[b] != WARPED {
+                    return None;
+                }
+                let (da, db) = (read.depth[a], read.depth[b]);
+                if da.max(db) > da.min(db) * CRACK_DEPTH_RATIO {
+                    return None;
+                }
+                let (ca, cb) = (read.color[a], read.color[b]);
+                let (ma, mb) = (read.motion[a], read.motion[b]);
+                let color = [
+                    (ca[0] + cb[0]) * 0.5,
+                    (ca[1] + cb[1]) * 0.5,
+                    (ca[2] + cb[2]) * 0.5,
+                    1.0,
+                ];
+                let motion = [(ma[0] + mb[0]) * 0.5, (ma[1] + mb[1]) * 0.5];
+                Some((t, color, (da + db) * 0.5, motion))
+            })
+        })
+        .collect();
+    for (t, color, depth, motion) in fixes {
+        out.color[t] = color;
+        out.depth[t] = depth;
+        out.motion[t] = motion;
+        out.mask[t] = CRACK;
     }
 }
 

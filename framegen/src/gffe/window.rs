@@ -47,15 +47,16 @@ pub fn crop(color: &[[f32; 4]], depth: &[f32], motion: &[[f32; 2]], c: &Crop) ->
     let (w, h) = c.source;
     let mut out = Output::empty(c.output.0, c.output.1);
     let scale = c.scale();
-    for t in 0..out.mask.len() {
+    use rayon::prelude::*;
+    out.par_pixels_mut().for_each(|(t, px)| {
         let s = c.source_of(t);
         let rgb = bilinear(color, w, h, s);
         let nearest = clamp_index(s, w, h);
-        out.color[t] = [rgb.x, rgb.y, rgb.z, 1.0];
-        out.depth[t] = depth[nearest];
-        out.motion[t] = (Vec2::from_array(motion[nearest]) * scale).to_array();
-        out.mask[t] = COPIED;
-    }
+        *px.color = [rgb.x, rgb.y, rgb.z, 1.0];
+        *px.depth = depth[nearest];
+        *px.motion = (Vec2::from_array(motion[nearest]) * scale).to_array();
+        *px.mask = COPIED;
+    });
     out
 }
 

@@ -262,7 +262,7 @@ impl GpuBackend {
 }
 
 impl Backend for GpuBackend {
-    fn ingest(&mut self, frame: &Prepared, plan: &IngestPlan) -> Result<u32, FramegenError> {
+    fn ingest(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<u32, FramegenError> {
         let n = frame.depth.len() as u64;
         // The largest buffers a frame of this size needs: the k history
         // positions and the colour (vec4<f32> per pixel).

@@ -10,8 +10,9 @@ use crate::splat::{Candidate, Winners, depth_key};
 
 /// Pass 2: motion in pixels → motion in uv (pixels / size, y down).
 pub fn normalize(motion: &[[f32; 2]], width: u32, height: u32) -> Vec<[f32; 2]> {
+    use rayon::prelude::*;
     let (w, h) = (width as f32, height as f32);
-    motion.iter().map(|m| [m[0] / w, m[1] / h]).collect()
+    motion.par_iter().map(|m| [m[0] / w, m[1] / h]).collect()
 }
 
 /// Pass 3: where each current pixel is at α (0 = previous frame, 1 =
@@ -24,9 +25,10 @@ pub fn project(
     height: u32,
     alpha: f32,
 ) -> Vec<Candidate> {
+    use rayon::prelude::*;
     let size = Vec2::new(width as f32, height as f32);
     uv_motion
-        .iter()
+        .par_iter()
         .zip(depth)
         .enumerate()
         .map(|(i, (m, &d))| {
@@ -47,14 +49,15 @@ pub fn project(
 /// Pass 4: every written pixel of `out` takes its winner's uv motion and
 /// depth and is flagged written ([`WARPED`]); the rest stay empty.
 pub fn merge(winners: &Winners, uv_motion: &[[f32; 2]], depth: &[f32], out: &mut Output) {
-    for t in 0..out.mask.len() {
+    use rayon::prelude::*;
+    out.par_pixels_mut().for_each(|(t, px)| {
         if let Some(i) = winners.winner(t) {
-            out.motion[t] = uv_motion[i];
-            out.depth[t] = depth[i];
-            out.color[t] = [0.0, 0.0, 0.0, 1.0];
-            out.mask[t] = WARPED;
+            *px.motion = uv_motion[i];
+            *px.depth = depth[i];
+            *px.color = [0.0, 0.0, 0.0, 1.0];
+            *px.mask = WARPED;
         }
-    }
+    });
 }
 
 #[repr(C)]

@@ -24,21 +24,22 @@ pub struct Image<'a> {
 /// CPU reference: turns `out` (uv motion + written mask after push-pull)
 /// into the interpolated frame.
 pub fn resolve(out: &mut Output, current: Image<'_>, previous: Image<'_>, alpha: f32) {
+    use rayon::prelude::*;
     let (w, h) = (out.width, out.height);
     let size = Vec2::new(w as f32, h as f32);
-    for t in 0..out.mask.len() {
+    out.par_pixels_mut().for_each(|(t, px)| {
         let center = pixel_center(t, w);
-        let m = Vec2::from_array(out.motion[t]) * size;
-        let (image, at) = if out.mask[t] == WARPED {
+        let m = Vec2::from_array(*px.motion) * size;
+        let (image, at) = if *px.mask == WARPED {
             (current, center - m * (1.0 - alpha))
         } else {
             (previous, center + m * alpha)
         };
         let c = bilinear(image.color, w, h, at);
-        out.color[t] = [c.x, c.y, c.z, 1.0];
-        out.depth[t] = image.depth[clamp_index(at, w, h)];
-        out.motion[t] = (m * alpha).to_array();
-    }
+        *px.color = [c.x, c.y, c.z, 1.0];
+        *px.depth = image.depth[clamp_index(at, w, h)];
+        *px.motion = (m * alpha).to_array();
+    });
 }
 
 #[repr(C)]

@@ -1,0 +1,26 @@
+//! How the CPU passes split their pixel loops across cores (rayon).
+//!
+//! Every parallel loop writes each output element from one task and sums
+//! only integers, so a pass's result does not depend on the number of
+//! threads or on how rayon schedules the tasks (tested in
+//! `tests/tests/framegen_parity.rs`).
+
+/// Pixels per parallel task for a `width`-wide image of `n` pixels: whole
+/// rows, about 16 K pixels (large enough that scheduling costs nothing, small
+/// enough that every core gets several bands at 360p), never 0.
+pub fn band(width: usize, n: usize) -> usize {
+    let width = width.max(1);
+    let rows = (16_384 / width).max(1);
+    (rows * width).min(n).max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn bands_are_whole_rows_and_never_empty() {
+        assert_eq!(super::band(1280, 1280 * 720), 12 * 1280);
+        assert_eq!(super::band(100_000, 100_000), 100_000);
+        assert_eq!(super::band(4, 8), 8);
+        assert_eq!(super::band(0, 0), 1);
+    }
+}
