@@ -67,15 +67,6 @@ impl Default for PresentConfig {
     }
 }
 
-/// The scheduling policy a method needs.
-pub fn policy_of(method: Method) -> Policy {
-    match method {
-        Method::Repeat => Policy::Repeat,
-        Method::Reproject | Method::Gffe => Policy::Extrapolate,
-        Method::Interp => Policy::Interpolate,
-    }
-}
-
 /// Rendered frames kept for rendered slots and interpolation pairs.
 const KEPT: usize = 6;
 
@@ -117,7 +108,7 @@ pub async fn run_headless(
     gpu: Option<Arc<GpuContext>>,
 ) -> anyhow::Result<Report> {
     let fps = session.welcome.fps;
-    let policy = policy_of(config.method);
+    let policy = config.method.descriptor().policy;
     let base = match config.refresh_hz {
         Some(hz) if hz.is_finite() && hz > 0.0 => ScheduleConfig::refresh(policy, fps, hz),
         _ => ScheduleConfig::multiple(policy, fps, config.n),

@@ -439,15 +439,15 @@ impl FrameGenerator {
         alpha: f64,
         source: CameraSource,
     ) -> Result<Generated, FramegenError> {
-        let interp = self.settings.method == Method::Interp;
-        let max_alpha = if interp { 1.0 } else { self.settings.max_alpha };
+        let method = self.settings.method.descriptor();
+        let max_alpha = method.max_alpha(self.settings.max_alpha);
         if !(alpha.is_finite() && alpha >= 0.0 && alpha <= max_alpha) {
             return Err(FramegenError::Alpha(alpha, max_alpha));
         }
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         // Interpolation runs between the previous frame (α = 0) and the
         // current one (α = 1): eq. 2 with α − 1 is the linear interpolation.
-        let along = if interp { alpha - 1.0 } else { alpha };
+        let along = method.along(alpha);
         let pose = match source {
             CameraSource::Extrapolated => match &cur.prev_pose {
                 Some(prev) => Pose::extrapolate(prev, &cur.meta.camera.pose, along),
@@ -462,13 +462,13 @@ impl FrameGenerator {
         let camera = Camera {
             pose,
             projection: cur.meta.camera.projection,
-            window: if interp {
+            window: if method.rendered_grid {
                 cur.meta.camera.window
             } else {
                 Window::FULL
             },
         };
-        let (dw, dh) = if interp {
+        let (dw, dh) = if method.rendered_grid {
             (cur.meta.size.width, cur.meta.size.height)
         } else {
             cur.display

@@ -18,6 +18,7 @@ pub mod gpu;
 pub mod input;
 pub mod interp;
 pub mod levels;
+pub mod method;
 pub mod metrics;
 pub mod output;
 mod par;
@@ -38,8 +39,9 @@ pub use generator::{
 };
 pub use gpu::timestamps::PassClock;
 pub use gpu::{GpuBackend, GpuContext};
+pub use method::{AlphaRange, Descriptor, Method};
 pub use metrics::{MetricsError, psnr, psnr_of_mse, squared_error_map, ssim, ssim_map};
-pub use settings::{Method, Settings};
+pub use settings::Settings;
 
 /// Everything that can go wrong in frame generation.
 #[derive(Debug, thiserror::Error)]

@@ -4,60 +4,8 @@
 use crate::FramegenError;
 use crate::gffe::background::MAX_LEVELS;
 use crate::gffe::history::MAX_HISTORY;
-
-/// A frame generation method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Method {
-    /// Show the last rendered frame again (DESIGN §6).
-    Repeat,
-    /// Camera-only reprojection with depth (timewarp / ASW style): no
-    /// object motion, no background layers; holes are push-pull filled.
-    Reproject,
-    /// G-buffer-free frame extrapolation, GFFE §4.1–4.3.
-    Gffe,
-    /// GeoMotionGen interpolation between the previous and the current
-    /// rendered frame (seed 003); α ∈ [0, 1], adds latency.
-    Interp,
-}
-
-impl Method {
-    /// Every method, baselines first.
-    pub const ALL: [Method; 4] = [
-        Method::Repeat,
-        Method::Reproject,
-        Method::Gffe,
-        Method::Interp,
-    ];
-
-    /// The extrapolating methods (no added latency), baselines first.
-    pub const EXTRAPOLATING: [Method; 3] = [Method::Repeat, Method::Reproject, Method::Gffe];
-
-    /// The name used on command lines and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Repeat => "repeat",
-            Method::Reproject => "reproject",
-            Method::Gffe => "gffe",
-            Method::Interp => "interp",
-        }
-    }
-}
-
-impl std::fmt::Display for Method {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for Method {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Method::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| format!("unknown method {s:?} (repeat, reproject, gffe, interp)"))
-    }
-}
+use crate::method::History;
+pub use crate::method::Method;
 
 /// Settings of a generator.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -166,18 +114,19 @@ impl Settings {
     /// positions and the static test, which detects cuts) for reproject
     /// and interp; 0 (no tracking) for repeat, which only crops.
     pub fn effective_history(&self) -> u32 {
-        match self.method {
-            Method::Gffe => self.history,
-            Method::Repeat => 0,
-            _ => 1,
+        match self.method.descriptor().history {
+            History::Chain => self.history,
+            History::Positions => 1,
+            History::None => 0,
         }
     }
 
     /// `L` as the passes use it: 0 for the baselines.
     pub fn effective_levels(&self) -> u32 {
-        match self.method {
-            Method::Gffe => self.background_levels,
-            _ => 0,
+        if self.method.descriptor().background {
+            self.background_levels
+        } else {
+            0
         }
     }
 }

@@ -31,7 +31,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context;
-use framegen::{FrameGenerator, GpuBackend, GpuContext, Method};
+use framegen::{FrameGenerator, GpuBackend, GpuContext};
 use indicatif::{ProgressBar, ProgressStyle};
 use protocol::wire::WindowMode;
 use protocol::{Frame, FrameSize};
@@ -319,7 +319,9 @@ fn run_group(
                 })
                 .clone();
             let scored = m / s >= config.warmup.max(1);
-            let interp = run.variant.settings.method == Method::Interp;
+            // A method that holds frames back shows frames that far behind
+            // the newest fed one (interpolation: the interval before it).
+            let behind = run.variant.settings.method.descriptor().held_back as usize * s;
             let mut outputs = Vec::new();
             for ((_, g), t) in run.generators.iter_mut().zip(&mut run.timing) {
                 let start = Instant::now();
@@ -342,7 +344,7 @@ fn run_group(
                 continue;
             }
             for j in 1..s {
-                let truth_pos = if interp { m - s + j } else { m + j };
+                let truth_pos = m + j - behind;
                 let truth = &at(truth_pos).truth;
                 let size = truth.meta.size;
                 let g = &outputs[0][j - 1];

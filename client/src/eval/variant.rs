@@ -89,7 +89,7 @@ impl Variant {
     /// Render intervals of latency the method adds (interpolation holds
     /// one frame back, DESIGN §6).
     pub fn added_latency_frames(&self) -> u32 {
-        u32::from(self.settings.method == Method::Interp)
+        self.settings.method.descriptor().held_back
     }
 }
 
