@@ -8,7 +8,7 @@
 //! caller knows), the displayed region of a widened window, and turning the
 //! passes' output into a [`Frame`] plus a per-pixel [`PixelSource`] mask.
 //! The passes themselves run on a [`Backend`]: the CPU reference
-//! ([`crate::cpu::CpuBackend`]) or wgpu ([`crate::gpu::GpuBackend`]).
+//! ([`crate::exec::cpu::CpuBackend`]) or wgpu ([`crate::exec::gpu::GpuBackend`]).
 //!
 //! A seam for GFFE's shading correction (§4.4) is left after the passes:
 //! it takes the generated color, depth and mask, which [`Generated`]
@@ -22,71 +22,14 @@ use half::f16;
 use protocol::{Camera, Frame, FrameMeta, FrameSize, Limits, Pose, Window};
 
 use crate::FramegenError;
-use crate::camera::PassCamera;
-use crate::gffe::window::Crop;
 use crate::gpu::GpuContext;
-use crate::input::{Prepared, Sanitized, prepare};
-use crate::levels::Levels;
+use crate::input::{Sanitized, prepare};
 use crate::output::{self, DisplayMap, Output};
-use crate::settings::{Method, Settings};
-
-/// A pass, for timings.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Pass {
-    /// Sanitising and (GPU) uploading the rendered frame.
-    Upload,
-    /// History tracking (GFFE Alg. 1).
-    History,
-    /// Background collection (GFFE §4.2).
-    Background,
-    /// Position estimation (eq. 1).
-    Motion,
-    /// Forward warp: project, splat, resolve.
-    Warp,
-    /// Background projection into holes.
-    BgFill,
-    /// Push-pull hole fill.
-    Holes,
-    /// Window crop (repeat).
-    Crop,
-    /// GeoMotionGen normalize + reproject + merge.
-    Reproject,
-    /// GeoMotionGen resolve.
-    Resolve,
-    /// (GPU) reading the generated frame back.
-    Readback,
-}
-
-impl Pass {
-    /// Name in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Pass::Upload => "upload",
-            Pass::History => "history",
-            Pass::Background => "background",
-            Pass::Motion => "motion",
-            Pass::Warp => "warp",
-            Pass::BgFill => "bgfill",
-            Pass::Holes => "holes",
-            Pass::Crop => "crop",
-            Pass::Reproject => "reproject",
-            Pass::Resolve => "resolve",
-            Pass::Readback => "readback",
-        }
-    }
-}
-
-/// Wall time of one pass.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PassTime {
-    /// The pass.
-    pub pass: Pass,
-    /// How long it took (GPU: submit + wait, only when profiling).
-    pub time: Duration,
-    /// GPU time between timestamps around the pass, when the profiled
-    /// backend uses timestamp queries (hardware adapters).
-    pub gpu: Option<Duration>,
-}
+use crate::passes::common::camera::PassCamera;
+use crate::passes::common::crop::Crop;
+use crate::passes::common::levels::Levels;
+use crate::pipeline::{Backend, IngestPlan, Job, PassTime, Snapshot};
+use crate::settings::Settings;
 
 /// Where a generated pixel came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -163,80 +106,6 @@ pub enum PushOutcome {
     Duplicate,
 }
 
-/// What a backend is asked to do with a rendered frame.
-#[derive(Clone, Copy, Debug)]
-pub struct IngestPlan {
-    /// `C_t`, centre at the origin.
-    pub camera: PassCamera,
-    /// `C_{t−1}` relative to `C_t`'s centre; `None` restarts the history.
-    pub prev: Option<PassCamera>,
-    /// History length (1 = positions of this frame and the static test
-    /// only, 0 = no tracking at all: `repeat` needs none).
-    pub k: u32,
-    /// Static-test threshold.
-    pub epsilon: f32,
-    /// Background layout (count 0 = none).
-    pub levels: Levels,
-    /// Case-2 depth margin.
-    pub tolerance: f32,
-}
-
-/// One generated frame to make.
-#[derive(Clone, Copy, Debug)]
-pub struct Job {
-    /// The method.
-    pub method: Method,
-    /// The generated frame's camera relative to `C_t`'s centre, at the
-    /// displayed size.
-    pub target: PassCamera,
-    /// `C_t` (for background motion vectors).
-    pub current: PassCamera,
-    /// α.
-    pub alpha: f32,
-    /// History length in use.
-    pub k: u32,
-    /// Rendered pixels → displayed pixels of `C_t`.
-    pub map: DisplayMap,
-    /// The background splat layout over the generated frame.
-    pub bg_target: Levels,
-    /// The rendered frame's background layout.
-    pub bg_source: Levels,
-    /// Push-pull levels.
-    pub pushpull: u32,
-    /// The displayed region of the rendered frame (repeat).
-    pub crop: Crop,
-}
-
-/// Runs the passes.
-pub trait Backend: Send {
-    /// Takes a sanitised rendered frame: history tracking and background
-    /// collection. Returns the number of dynamic pixels. The frame is
-    /// shared, so a backend that keeps it (the CPU reference) copies
-    /// nothing.
-    fn ingest(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<u32, FramegenError>;
-    /// Runs the generation passes for `job` on the last ingested frame.
-    fn generate(&mut self, job: &Job) -> Result<Output, FramegenError>;
-    /// Drops all history.
-    fn reset(&mut self);
-    /// Wall times of the passes of the last `ingest` + `generate`.
-    fn timings(&self) -> Vec<PassTime>;
-    /// A name for reports ("cpu", or the GPU adapter).
-    fn name(&self) -> String;
-    /// The state the last ingest left (for parity tests and debugging).
-    fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError>;
-}
-
-/// What ingesting a rendered frame produced.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Snapshot {
-    /// `k` planes of history positions.
-    pub positions: Vec<[f32; 4]>,
-    /// Track words.
-    pub track: Vec<u32>,
-    /// Background texels.
-    pub background: Vec<crate::gffe::background::Texel>,
-}
-
 /// What the generator remembers of the last rendered frame.
 #[derive(Clone, Debug)]
 struct Current {
@@ -268,14 +137,14 @@ impl std::fmt::Debug for FrameGenerator {
 impl FrameGenerator {
     /// A generator on the CPU reference.
     pub fn cpu(settings: Settings) -> Result<Self, FramegenError> {
-        Self::with_backend(settings, Box::new(crate::cpu::CpuBackend::default()))
+        Self::with_backend(settings, Box::new(crate::exec::cpu::CpuBackend::default()))
     }
 
     /// A generator on wgpu. A kernel the device cannot build (e.g. a
     /// limit of wgpu's OpenGL backend) is a typed error.
     pub fn gpu(settings: Settings, ctx: Arc<GpuContext>) -> Result<Self, FramegenError> {
         let backend = ctx.checked("compiling the generator's kernels", || {
-            crate::gpu::GpuBackend::new(ctx.clone())
+            crate::exec::gpu::GpuBackend::new(ctx.clone())
         })?;
         Self::with_backend(settings, Box::new(backend))
     }

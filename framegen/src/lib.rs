@@ -2,45 +2,41 @@
 //! frames go in one by one, generated frames at any α come out.
 //!
 //! * [`FrameGenerator`] is the one API for every [`Method`]: `repeat`,
-//!   `reproject` (camera-only, with depth) and `gffe` (G-buffer-free frame
-//!   extrapolation, seed 000), on the CPU reference or on wgpu.
-//! * Each GFFE pass is a module in [`gffe`] with its WGSL shader beside it
+//!   `reproject` (camera-only, with depth), `gffe` (G-buffer-free frame
+//!   extrapolation, seed 000) and `interp` (GeoMotionGen interpolation,
+//!   seed 003), on the CPU reference or on wgpu ([`exec`]).
+//! * Each pass is a module in [`passes`] with its WGSL shader beside it
 //!   and a plain CPU reference of the same computation.
 //! * [`display`] and [`metrics`] are what every method is measured by.
 
 pub mod accounting;
-pub mod camera;
-pub mod cpu;
 pub mod decimate;
+pub mod exec;
 pub mod generator;
-pub mod gffe;
 pub mod gpu;
 pub mod input;
-pub mod interp;
-pub mod levels;
 pub mod method;
 pub mod metrics;
 pub mod output;
 mod par;
-pub mod sample;
+pub mod passes;
+pub mod pipeline;
 pub mod schedule;
 pub mod settings;
-pub mod splat;
 
 /// The fixed display transform lives in `protocol` (it is part of the data
 /// contract); re-exported here for the metrics' users.
 pub use protocol::display;
 
-pub use cpu::CpuBackend;
 pub use display::{DisplayImage, display_encode};
-pub use generator::{
-    Backend, CameraSource, FrameGenerator, Generated, IngestPlan, Job, Pass, PassTime, PixelSource,
-    PushOutcome, Snapshot,
-};
+pub use exec::cpu::CpuBackend;
+pub use exec::gpu::GpuBackend;
+pub use generator::{CameraSource, FrameGenerator, Generated, PixelSource, PushOutcome};
+pub use gpu::GpuContext;
 pub use gpu::timestamps::PassClock;
-pub use gpu::{GpuBackend, GpuContext};
 pub use method::{AlphaRange, Descriptor, Method};
 pub use metrics::{MetricsError, psnr, psnr_of_mse, squared_error_map, ssim, ssim_map};
+pub use pipeline::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
 pub use settings::Settings;
 
 /// Everything that can go wrong in frame generation.

@@ -2,10 +2,10 @@
 //! field is one of the knobs the `eval` report sweeps (DESIGN §9).
 
 use crate::FramegenError;
-use crate::gffe::background::MAX_LEVELS;
-use crate::gffe::history::MAX_HISTORY;
 use crate::method::History;
 pub use crate::method::Method;
+use crate::passes::gffe::background::MAX_LEVELS;
+use crate::passes::gffe::history::MAX_HISTORY;
 
 /// Settings of a generator.
 #[derive(Clone, Copy, Debug, PartialEq)]

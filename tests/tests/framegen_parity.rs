@@ -11,8 +11,9 @@
 
 #![allow(clippy::needless_range_loop)] // pixel loops index several buffers
 
-use framegen::gffe::{holes, warp, window};
-use framegen::splat::{self, Candidate, GpuSplat};
+use framegen::passes::common::splat::{self, Candidate, GpuSplat};
+use framegen::passes::common::{crop, pushpull};
+use framegen::passes::gffe::warp;
 use framegen::{FrameGenerator, GpuContext, Method, PixelSource, Settings};
 use protocol::{Frame, FrameSize};
 use std::sync::Arc;
@@ -41,9 +42,12 @@ fn pos_close(a: [f32; 4], b: [f32; 4]) -> bool {
 /// reference without a previous frame).
 fn unprojected(f: &Frame) -> Vec<[f32; 4]> {
     let p = framegen::input::prepare(f);
-    let cam =
-        framegen::camera::PassCamera::new(&f.meta.camera, f.meta.size, f.meta.camera.pose.position);
-    framegen::gffe::history::track(&cam, &p.depth, &p.motion, None, 1, 0.5, 0.02).positions
+    let cam = framegen::passes::common::camera::PassCamera::new(
+        &f.meta.camera,
+        f.meta.size,
+        f.meta.camera.pose.position,
+    );
+    framegen::passes::gffe::history::track(&cam, &p.depth, &p.motion, None, 1, 0.5, 0.02).positions
 }
 
 /// History tracking and background collection: positions, track words and
@@ -122,7 +126,11 @@ fn splat_winners_are_exact() {
     let mut target_cam = f.meta.camera;
     target_cam.pose.position += glam::DVec3::new(0.3, 0.1, -0.4);
     target_cam.pose.rotation *= glam::DQuat::from_rotation_y(0.05);
-    let target = framegen::camera::PassCamera::new(&target_cam, SIZE, f.meta.camera.pose.position);
+    let target = framegen::passes::common::camera::PassCamera::new(
+        &target_cam,
+        SIZE,
+        f.meta.camera.pose.position,
+    );
     let mut cands = warp::project(&positions, &target);
     cands.extend_from_slice(&cands.clone()[..500]);
     cands.push(Candidate::MISS);
@@ -165,7 +173,7 @@ fn warp_projection_matches() {
             protocol::Pose::extrapolate(&fs[0].meta.camera.pose, &f.meta.camera.pose, 0.5);
         let mut tc = f.meta.camera;
         tc.pose = target_pose;
-        let target = framegen::camera::PassCamera::new(&tc, SIZE, origin);
+        let target = framegen::passes::common::camera::PassCamera::new(&tc, SIZE, origin);
         let cpu = warp::project(&next, &target);
         let nbuf = ctx.storage_init("next", bytemuck::cast_slice(&next));
         let cbuf = ctx.storage("cands", next.len() as u64 * 8);
@@ -197,7 +205,7 @@ fn warp_projection_matches() {
 #[test]
 fn push_pull_matches() {
     let ctx = ctx();
-    let gh = holes::GpuHoles::new(&ctx);
+    let gh = pushpull::GpuHoles::new(&ctx);
     let fs = frames("crossing", 30, 1);
     let p = framegen::input::prepare(&fs[0]);
     let mut out = framegen::output::Output::empty(SIZE.width, SIZE.height);
@@ -214,8 +222,8 @@ fn push_pull_matches() {
     }
     for levels in [1, 3, 7] {
         let mut cpu = out.clone();
-        holes::fill(&mut cpu, levels);
-        let layout = holes::layout(SIZE.width, SIZE.height, levels);
+        pushpull::fill(&mut cpu, levels);
+        let layout = pushpull::layout(SIZE.width, SIZE.height, levels);
         let n = out.mask.len();
         let c = ctx.storage_init("c", bytemuck::cast_slice(&out.color));
         let d = ctx.storage_init("d", bytemuck::cast_slice(&out.depth));
@@ -251,7 +259,7 @@ fn push_pull_matches() {
 #[test]
 fn crop_matches() {
     let ctx = ctx();
-    let gc = window::GpuCrop::new(&ctx);
+    let gc = crop::GpuCrop::new(&ctx);
     let fs = frames("pan", 30, 1);
     let p = framegen::input::prepare(&fs[0]);
     for (origin, extent, output) in [
@@ -271,13 +279,13 @@ fn crop_matches() {
             (110, 62),
         ),
     ] {
-        let c = window::Crop {
+        let c = crop::Crop {
             source: (SIZE.width, SIZE.height),
             origin,
             extent,
             output,
         };
-        let cpu = window::crop(&p.color, &p.depth, &p.motion, &c);
+        let cpu = crop::crop(&p.color, &p.depth, &p.motion, &c);
         let n = cpu.mask.len();
         let bufs: Vec<_> = [
             bytemuck::cast_slice::<_, u8>(&p.color).to_vec(),

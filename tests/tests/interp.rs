@@ -3,7 +3,7 @@
 //! parity of its passes. (Quality against ground truth is in
 //! `framegen_quality.rs`; NaN / inf inputs in `hard_cases.rs`.)
 
-use framegen::interp::reproject;
+use framegen::passes::interp::reproject;
 use framegen::{FrameGenerator, GpuContext, Method, PixelSource, Settings};
 use protocol::{Frame, FrameSize};
 
@@ -175,7 +175,7 @@ fn reprojection_matches() {
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         gr.encode_project(&ctx, &mut enc, (w, h), 0.5, &motion, &depth, &uvb, &cands);
         ctx.queue.submit([enc.finish()]);
-        let gpu: Vec<framegen::splat::Candidate> = ctx.read_pod(&cands, n).unwrap();
+        let gpu: Vec<framegen::passes::common::splat::Candidate> = ctx.read_pod(&cands, n).unwrap();
         let gpu_uv: Vec<[f32; 2]> = ctx.read_pod(&uvb, n).unwrap();
         assert_eq!(gpu_uv, uv, "{scene}: normalize");
         let differ = cpu.iter().zip(&gpu).filter(|(a, b)| a != b).count();

@@ -19,9 +19,7 @@ pub const WORKGROUP: u32 = 256;
 /// Largest workgroup count along one dispatch dimension (WebGPU's default).
 const MAX_GROUPS_X: u32 = 32768;
 
-mod backend;
 pub mod timestamps;
-pub use backend::GpuBackend;
 
 /// The WGSL every pass shader is prefixed with (see `common.wgsl`).
 pub const COMMON_WGSL: &str = include_str!("common.wgsl");

@@ -16,8 +16,8 @@
 use glam::{Vec2, Vec4};
 
 use crate::gpu::{Binding, GpuContext, Kernel};
-use crate::levels::Levels;
 use crate::output::{EMPTY, FILLED, Output};
+use crate::passes::common::levels::Levels;
 
 /// A pyramid texel (WGSL `PpTexel`).
 #[repr(C)]
@@ -239,7 +239,7 @@ impl GpuHoles {
     /// Compiles the kernels.
     pub fn new(ctx: &GpuContext) -> Self {
         use Binding::*;
-        let src = include_str!("holes.wgsl");
+        let src = include_str!("pushpull.wgsl");
         let b = &[
             Uniform, ReadWrite, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
         ];
@@ -257,7 +257,7 @@ impl GpuHoles {
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
-        out: crate::gffe::warp::GpuOutput<'_>,
+        out: crate::passes::gffe::warp::GpuOutput<'_>,
         pyramid: &wgpu::Buffer,
         layout: Levels,
     ) {

@@ -8,9 +8,9 @@
 //! |---|---|---|
 //! | 1 clear | `clear_buffer` of the splat buffers | the unwritten value is 0 |
 //! | 2 normalize | [`reproject::normalize`] | pixels → uv |
-//! | 3 reproject | [`reproject::project`] + `crate::splat` | depth-aware, exact |
+//! | 3 reproject | [`reproject::project`] + `crate::passes::common::splat` | depth-aware, exact |
 //! | 4 merge | [`reproject::merge`] | winner → motion, depth, written |
-//! | 5 pull / 6 push | [`crate::gffe::holes`] | the same push-pull as GFFE's holes |
+//! | 5 pull / 6 push | [`crate::passes::common::pushpull`] | the same push-pull as GFFE's holes |
 //! | 7 resolve | [`resolve`] | written → current frame, unwritten → previous |
 //!
 //! Choices where the seed is ambiguous or wrong, each tested:

@@ -6,19 +6,20 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use crate::FramegenError;
-use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
-use crate::gffe::{background, bgfill, history, holes, motion, warp, window};
 use crate::input::Prepared;
-use crate::interp::{reproject, resolve};
-use crate::levels::Levels;
 use crate::output::Output;
+use crate::passes::common::levels::Levels;
+use crate::passes::common::splat;
+use crate::passes::common::{crop, pushpull};
+use crate::passes::gffe::{background, bgfill, history, motion, warp};
+use crate::passes::interp::{reproject, resolve};
+use crate::pipeline::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
 use crate::settings::Method;
-use crate::splat;
 
 /// One ingested frame.
 #[derive(Clone, Debug)]
 struct FrameState {
-    camera: crate::camera::PassCamera,
+    camera: crate::passes::common::camera::PassCamera,
     frame: Arc<Prepared>,
     history: history::History,
     k: u32,
@@ -128,7 +129,7 @@ impl Backend for CpuBackend {
         }
         if job.method == Method::Repeat {
             let mut out = timed(t, Pass::Crop, || {
-                window::crop(
+                crop::crop(
                     &cur.frame.color,
                     &cur.frame.depth,
                     &cur.frame.motion,
@@ -171,7 +172,7 @@ impl Backend for CpuBackend {
                 );
             });
         }
-        timed(t, Pass::Holes, || holes::fill(&mut out, job.pushpull));
+        timed(t, Pass::Holes, || pushpull::fill(&mut out, job.pushpull));
         Ok(out)
     }
 
@@ -209,14 +210,14 @@ fn interpolate(
     let (w, h) = (cur.camera.width(), cur.camera.height());
     let f = &cur.frame;
     let Some(prev) = previous.filter(|p| p.frame.depth.len() == f.depth.len()) else {
-        let identity = window::Crop {
+        let identity = crop::Crop {
             source: (w, h),
             origin: glam::Vec2::ZERO,
             extent: glam::Vec2::new(w as f32, h as f32),
             output: (w, h),
         };
         return timed(t, Pass::Crop, || {
-            window::crop(&f.color, &f.depth, &f.motion, &identity)
+            crop::crop(&f.color, &f.depth, &f.motion, &identity)
         });
     };
     let mut out = timed(t, Pass::Reproject, || {
@@ -227,7 +228,7 @@ fn interpolate(
         reproject::merge(&winners, &uv, &f.depth, &mut out);
         out
     });
-    timed(t, Pass::Holes, || holes::fill(&mut out, job.pushpull));
+    timed(t, Pass::Holes, || pushpull::fill(&mut out, job.pushpull));
     timed(t, Pass::Resolve, || {
         let (current, previous) = (
             resolve::Image {

@@ -11,12 +11,12 @@
 
 use glam::Vec2;
 
-use crate::camera::{PassCamera, cell, pixel_center};
-use crate::gffe::background::{MAX_LEVELS, Texel};
 use crate::gpu::{Binding, GpuContext, Kernel};
-use crate::levels::Levels;
 use crate::output::{BACKGROUND, DisplayMap, EMPTY, Output};
-use crate::splat::{Candidate, Winners, depth_key};
+use crate::passes::common::camera::{PassCamera, cell, pixel_center};
+use crate::passes::common::levels::Levels;
+use crate::passes::common::splat::{Candidate, Winners, depth_key};
+use crate::passes::gffe::background::{MAX_LEVELS, Texel};
 
 /// CPU reference of `bgfill_project`: one candidate per background texel.
 /// `source` is the background's layout, `target` the generated frame's
@@ -198,7 +198,7 @@ impl GpuBgFill {
         bg: &wgpu::Buffer,
         keys: &wgpu::Buffer,
         winners: &wgpu::Buffer,
-        out: crate::gffe::warp::GpuOutput<'_>,
+        out: crate::passes::gffe::warp::GpuOutput<'_>,
         pixels: u32,
     ) {
         self.resolve.dispatch(

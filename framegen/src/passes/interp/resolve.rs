@@ -7,10 +7,10 @@
 
 use glam::Vec2;
 
-use crate::camera::pixel_center;
 use crate::gpu::{Binding, GpuContext, Kernel};
 use crate::output::{Output, WARPED};
-use crate::sample::{bilinear, clamp_index};
+use crate::passes::common::camera::pixel_center;
+use crate::passes::common::sample::{bilinear, clamp_index};
 
 /// One rendered frame's color and depth.
 #[derive(Clone, Copy, Debug)]
@@ -90,7 +90,7 @@ impl GpuResolve {
         alpha: f32,
         current: GpuImage<'_>,
         previous: GpuImage<'_>,
-        out: crate::gffe::warp::GpuOutput<'_>,
+        out: crate::passes::gffe::warp::GpuOutput<'_>,
     ) {
         let p = ctx.uniform(bytemuck::bytes_of(&Params {
             size: [width, height, 0, 0],

@@ -35,8 +35,10 @@
 
 use glam::Vec2;
 
-use crate::camera::{PassCamera, W_DIRECTION, W_INVALID, cell, pixel_center, rebase};
 use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::passes::common::camera::{
+    PassCamera, W_DIRECTION, W_INVALID, cell, pixel_center, rebase,
+};
 
 /// The previous rendered frame's history, as the current frame sees it.
 #[derive(Clone, Copy, Debug)]

@@ -1,4 +1,4 @@
-// Push-pull hole fill. See `holes.rs`.
+// Push-pull hole fill. See `pushpull.rs`.
 
 struct PpTexel {
     a: vec4<f32>,
@@ -88,7 +88,7 @@ fn pp_push(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     let q = p - 0.5;
     let base = floor(q);
     let f = q - base;
-    // Weighted bilinear: each tap counts with its own weight (see holes.rs).
+    // Weighted bilinear: each tap counts with its own weight (see pushpull.rs).
     var taps = array<PpTexel, 4>(
         at(base.x, base.y),
         at(base.x + 1.0, base.y),

@@ -7,11 +7,11 @@
 //! | 1 history tracking + static test | [`history`] | Alg. 1 (appendix B) |
 //! | 2 position estimation | [`motion`] | eq. 1 |
 //! | 3 camera extrapolation | `protocol::Pose::extrapolate` | eq. 2 |
-//! | 4 depth-tested forward warp | [`warp`] + `crate::splat` | §4.1 |
+//! | 4 depth-tested forward warp | [`warp`] + `crate::passes::common::splat` | §4.1 |
 //! | 5 layered background collection | [`background`] | §4.2, Fig. 5 |
 //! | 6 background projection into holes | [`bgfill`] | §4.2 |
-//! | 7 push-pull fill of what remains | [`holes`] | DESIGN §4 step 7 |
-//! | 8 adaptive window crop | [`window`] | §4.3, appendix C |
+//! | 7 push-pull fill of what remains | [`crate::passes::common::pushpull`] | DESIGN §4 step 7 |
+//! | 8 adaptive window crop | [`crate::passes::common::crop`] | §4.3, appendix C |
 //!
 //! Shading correction (§4.4) is a later stage; it plugs in after step 7 on
 //! the generated color, depth and mask.
@@ -19,7 +19,5 @@
 pub mod background;
 pub mod bgfill;
 pub mod history;
-pub mod holes;
 pub mod motion;
 pub mod warp;
-pub mod window;

@@ -28,11 +28,11 @@
 
 use glam::Vec3;
 
-use crate::camera::{PassCamera, W_INVALID, cell, rebase};
-use crate::gffe::history::{is_confirmed, is_dynamic};
 use crate::gpu::{Binding, GpuContext, Kernel};
-use crate::levels::Levels;
-use crate::splat::{self, Candidate, depth_key};
+use crate::passes::common::camera::{PassCamera, W_INVALID, cell, rebase};
+use crate::passes::common::levels::Levels;
+use crate::passes::common::splat::{self, Candidate, depth_key};
+use crate::passes::gffe::history::{is_confirmed, is_dynamic};
 
 /// Most background levels.
 pub const MAX_LEVELS: u32 = 4;

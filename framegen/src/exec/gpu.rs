@@ -1,4 +1,4 @@
-//! The wgpu backend: the same passes as [`crate::cpu::CpuBackend`], as
+//! The wgpu backend: the same passes as [`crate::exec::cpu::CpuBackend`], as
 //! compute kernels over storage buffers. Per-pass wall times (submit +
 //! wait; lavapipe's timestamp queries are unreliable) are recorded when
 //! profiling is on; otherwise each ingest and each generation is one
@@ -8,24 +8,24 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use crate::FramegenError;
-use crate::camera::PassCamera;
-use crate::generator::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
-use crate::gffe::background::{GpuBackground, Texel as BgTexel};
-use crate::gffe::bgfill::GpuBgFill;
-use crate::gffe::history::{GpuHistory, GpuHistoryBuffers};
-use crate::gffe::holes::{self, GpuHoles, Texel as PpTexel};
-use crate::gffe::motion::GpuMotion;
-use crate::gffe::warp::{GpuOutput, GpuWarp};
-use crate::gffe::window::{Crop, GpuCrop};
 use crate::gpu::GpuContext;
 use crate::gpu::timestamps::{PassClock, Timestamps};
 use crate::input::Prepared;
-use crate::interp::reproject::GpuReproject;
-use crate::interp::resolve::{GpuImage, GpuResolve};
-use crate::levels::Levels;
 use crate::output::Output;
+use crate::passes::common::camera::PassCamera;
+use crate::passes::common::crop::{Crop, GpuCrop};
+use crate::passes::common::levels::Levels;
+use crate::passes::common::pushpull::{self, GpuHoles, Texel as PpTexel};
+use crate::passes::common::splat::GpuSplat;
+use crate::passes::gffe::background::{GpuBackground, Texel as BgTexel};
+use crate::passes::gffe::bgfill::GpuBgFill;
+use crate::passes::gffe::history::{GpuHistory, GpuHistoryBuffers};
+use crate::passes::gffe::motion::GpuMotion;
+use crate::passes::gffe::warp::{GpuOutput, GpuWarp};
+use crate::passes::interp::reproject::GpuReproject;
+use crate::passes::interp::resolve::{GpuImage, GpuResolve};
+use crate::pipeline::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
 use crate::settings::Method;
-use crate::splat::GpuSplat;
 
 /// Every kernel, compiled once.
 #[derive(Debug)]
@@ -228,7 +228,7 @@ impl GpuBackend {
                     let why = FramegenError::Device(format!(
                         "{} lacks {:?}",
                         b.ctx.adapter_info.name,
-                        super::timestamps::FEATURES
+                        crate::gpu::timestamps::FEATURES
                     ));
                     return Err((b, why));
                 }
@@ -489,7 +489,7 @@ impl GpuBackend {
             u64::from(cur.n) * 16,
         )
         .clone();
-        let layout = holes::layout(tw, th, job.pushpull);
+        let layout = pushpull::layout(tw, th, job.pushpull);
         let pyramid = ensure(
             ctx,
             &mut scratch.pyramid,

@@ -18,10 +18,10 @@
 //! ([`WARPED`]) and writes only holes ([`CRACK`]), so it is
 //! order-independent.
 
-use crate::camera::{PassCamera, cell, pixel_center};
 use crate::gpu::{Binding, GpuContext, Kernel};
 use crate::output::{CRACK, DisplayMap, EMPTY, Output, WARPED};
-use crate::splat::{Candidate, Winners, depth_key};
+use crate::passes::common::camera::{PassCamera, cell, pixel_center};
+use crate::passes::common::splat::{Candidate, Winners, depth_key};
 
 /// CPU reference of `warp_project`: one candidate per source pixel.
 /// `next` and `target` are relative to the same origin.

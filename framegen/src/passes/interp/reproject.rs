@@ -1,12 +1,12 @@
 //! GeoMotionGen passes 2–4 (seed 003): normalize, reproject, merge. See the
-//! module docs of [`crate::interp`] for the conventions chosen.
+//! module docs of [`crate::passes::interp`] for the conventions chosen.
 
 use glam::Vec2;
 
-use crate::camera::{cell, pixel_center};
 use crate::gpu::{Binding, GpuContext, Kernel};
 use crate::output::{Output, WARPED};
-use crate::splat::{Candidate, Winners, depth_key};
+use crate::passes::common::camera::{cell, pixel_center};
+use crate::passes::common::splat::{Candidate, Winners, depth_key};
 
 /// Pass 2: motion in pixels → motion in uv (pixels / size, y down).
 pub fn normalize(motion: &[[f32; 2]], width: u32, height: u32) -> Vec<[f32; 2]> {
@@ -146,7 +146,7 @@ impl GpuReproject {
         depth: &wgpu::Buffer,
         winners: &wgpu::Buffer,
         uv: &wgpu::Buffer,
-        out: crate::gffe::warp::GpuOutput<'_>,
+        out: crate::passes::gffe::warp::GpuOutput<'_>,
     ) {
         let p = Self::params(ctx, width, height, 0.0);
         let n = u64::from(width) * u64::from(height);

@@ -1,4 +1,4 @@
-// Crop (and resample) the displayed region of a widened window. See `window.rs`.
+// Crop (and resample) the displayed region of a widened window. See `crop.rs`.
 
 struct CropParams {
     sizes: vec4<u32>,

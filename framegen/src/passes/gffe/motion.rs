@@ -12,9 +12,9 @@
 
 use glam::Vec3;
 
-use crate::camera::W_POINT;
-use crate::gffe::history::{MAX_HISTORY, chain, is_dynamic};
 use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::passes::common::camera::W_POINT;
+use crate::passes::gffe::history::{MAX_HISTORY, chain, is_dynamic};
 
 /// Eq. 1 for one pixel. `planes` are `P_0..P_{k−1}` of the pixel.
 pub fn estimate_pixel(planes: &[[f32; 4]], track: u32, alpha: f32) -> [f32; 4] {

@@ -11,10 +11,10 @@
 
 use glam::Vec2;
 
-use crate::camera::pixel_center;
 use crate::gpu::{Binding, GpuContext, Kernel};
 use crate::output::{COPIED, Output};
-use crate::sample::{bilinear, clamp_index};
+use crate::passes::common::camera::pixel_center;
+use crate::passes::common::sample::{bilinear, clamp_index};
 
 /// Where the displayed region lies in the rendered image.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -82,7 +82,7 @@ impl GpuCrop {
         Self {
             kernel: Kernel::new(
                 ctx,
-                include_str!("window.wgsl"),
+                include_str!("crop.wgsl"),
                 "crop",
                 &[
                     Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
@@ -101,7 +101,7 @@ impl GpuCrop {
         color: &wgpu::Buffer,
         depth: &wgpu::Buffer,
         motion: &wgpu::Buffer,
-        out: crate::gffe::warp::GpuOutput<'_>,
+        out: crate::passes::gffe::warp::GpuOutput<'_>,
     ) {
         let params = ctx.uniform(bytemuck::bytes_of(&Params {
             sizes: [c.source.0, c.source.1, c.output.0, c.output.1],

@@ -1,0 +1,150 @@
+//! The contract between the generator and the backends that run the
+//! passes: what ingesting a rendered frame and making one generated frame
+//! ask for ([`IngestPlan`], [`Job`]), the backend trait, the pass names of
+//! timings, and the history snapshot the parity tests compare. Kept apart
+//! from the generator so that the generator and each executor depend on
+//! it, never on each other (DESIGN §2: `pipeline/`, where each method's plan,
+//! written once over an executor trait, is to live).
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use crate::FramegenError;
+use crate::input::Prepared;
+use crate::output::{DisplayMap, Output};
+use crate::passes::common::camera::PassCamera;
+use crate::passes::common::crop::Crop;
+use crate::passes::common::levels::Levels;
+use crate::settings::Method;
+
+/// A pass, for timings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Pass {
+    /// Sanitising and (GPU) uploading the rendered frame.
+    Upload,
+    /// History tracking (GFFE Alg. 1).
+    History,
+    /// Background collection (GFFE §4.2).
+    Background,
+    /// Position estimation (eq. 1).
+    Motion,
+    /// Forward warp: project, splat, resolve.
+    Warp,
+    /// Background projection into holes.
+    BgFill,
+    /// Push-pull hole fill.
+    Holes,
+    /// Window crop (repeat).
+    Crop,
+    /// GeoMotionGen normalize + reproject + merge.
+    Reproject,
+    /// GeoMotionGen resolve.
+    Resolve,
+    /// (GPU) reading the generated frame back.
+    Readback,
+}
+
+impl Pass {
+    /// Name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Pass::Upload => "upload",
+            Pass::History => "history",
+            Pass::Background => "background",
+            Pass::Motion => "motion",
+            Pass::Warp => "warp",
+            Pass::BgFill => "bgfill",
+            Pass::Holes => "holes",
+            Pass::Crop => "crop",
+            Pass::Reproject => "reproject",
+            Pass::Resolve => "resolve",
+            Pass::Readback => "readback",
+        }
+    }
+}
+
+/// Wall time of one pass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PassTime {
+    /// The pass.
+    pub pass: Pass,
+    /// How long it took (GPU: submit + wait, only when profiling).
+    pub time: Duration,
+    /// GPU time between timestamps around the pass, when the profiled
+    /// backend uses timestamp queries (hardware adapters).
+    pub gpu: Option<Duration>,
+}
+
+/// What a backend is asked to do with a rendered frame.
+#[derive(Clone, Copy, Debug)]
+pub struct IngestPlan {
+    /// `C_t`, centre at the origin.
+    pub camera: PassCamera,
+    /// `C_{t−1}` relative to `C_t`'s centre; `None` restarts the history.
+    pub prev: Option<PassCamera>,
+    /// History length (1 = positions of this frame and the static test
+    /// only, 0 = no tracking at all: `repeat` needs none).
+    pub k: u32,
+    /// Static-test threshold.
+    pub epsilon: f32,
+    /// Background layout (count 0 = none).
+    pub levels: Levels,
+    /// Case-2 depth margin.
+    pub tolerance: f32,
+}
+
+/// One generated frame to make.
+#[derive(Clone, Copy, Debug)]
+pub struct Job {
+    /// The method.
+    pub method: Method,
+    /// The generated frame's camera relative to `C_t`'s centre, at the
+    /// displayed size.
+    pub target: PassCamera,
+    /// `C_t` (for background motion vectors).
+    pub current: PassCamera,
+    /// α.
+    pub alpha: f32,
+    /// History length in use.
+    pub k: u32,
+    /// Rendered pixels → displayed pixels of `C_t`.
+    pub map: DisplayMap,
+    /// The background splat layout over the generated frame.
+    pub bg_target: Levels,
+    /// The rendered frame's background layout.
+    pub bg_source: Levels,
+    /// Push-pull levels.
+    pub pushpull: u32,
+    /// The displayed region of the rendered frame (repeat).
+    pub crop: Crop,
+}
+
+/// Runs the passes.
+pub trait Backend: Send {
+    /// Takes a sanitised rendered frame: history tracking and background
+    /// collection. Returns the number of dynamic pixels. The frame is
+    /// shared, so a backend that keeps it (the CPU reference) copies
+    /// nothing.
+    fn ingest(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<u32, FramegenError>;
+    /// Runs the generation passes for `job` on the last ingested frame.
+    fn generate(&mut self, job: &Job) -> Result<Output, FramegenError>;
+    /// Drops all history.
+    fn reset(&mut self);
+    /// Wall times of the passes of the last `ingest` + `generate`.
+    fn timings(&self) -> Vec<PassTime>;
+    /// A name for reports ("cpu", or the GPU adapter).
+    fn name(&self) -> String;
+    /// The state the last ingest left (for parity tests and debugging).
+    fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError>;
+}
+
+/// What ingesting a rendered frame produced.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Snapshot {
+    /// `k` planes of history positions.
+    pub positions: Vec<[f32; 4]>,
+    /// Track words.
+    pub track: Vec<u32>,
+    /// Background texels.
+    pub background: Vec<crate::passes::gffe::background::Texel>,
+}
