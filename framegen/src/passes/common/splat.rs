@@ -80,14 +80,19 @@ impl Winners {
 pub fn resolve(candidates: &[Candidate], slots: usize) -> Winners {
     use rayon::prelude::*;
     use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
-    let zeroed = || (0..slots).map(|_| AtomicU32::new(0)).collect::<Vec<_>>();
+    let zeroed = || {
+        (0..slots)
+            .into_par_iter()
+            .map(|_| AtomicU32::new(0))
+            .collect::<Vec<_>>()
+    };
     let keys = zeroed();
     candidates.par_iter().for_each(|c| {
         if let Some(k) = keys.get(c.slot as usize) {
             k.fetch_max(c.key, Relaxed);
         }
     });
-    let keys: Vec<u32> = keys.into_iter().map(AtomicU32::into_inner).collect();
+    let keys: Vec<u32> = keys.into_par_iter().map(AtomicU32::into_inner).collect();
     let stored = zeroed();
     candidates.par_iter().enumerate().for_each(|(i, c)| {
         let slot = c.slot as usize;
@@ -95,7 +100,7 @@ pub fn resolve(candidates: &[Candidate], slots: usize) -> Winners {
             stored[slot].fetch_max(!(i as u32), Relaxed);
         }
     });
-    let stored = stored.into_iter().map(AtomicU32::into_inner).collect();
+    let stored = stored.into_par_iter().map(AtomicU32::into_inner).collect();
     Winners { keys, stored }
 }
 
