@@ -120,6 +120,7 @@ impl Renderer {
     /// Prepares a renderer for `scene` at `size`: GPU, meshes, and the
     /// pipelines of the planned passes only. `base` resolves glTF paths.
     pub fn new(scene: Scene, size: FrameSize, base: &Path) -> Result<Self, RenderError> {
+        // The size first: a bad one is an error before any device opens.
         Self::check_size(size)?;
         Self::on(gpu::open()?, scene, size, base)
     }
