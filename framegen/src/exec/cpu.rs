@@ -1,6 +1,7 @@
-//! The CPU reference backend: the passes' plain Rust references, run in
-//! order. Slow, simple, and the yardstick the wgpu backend is tested
-//! against.
+//! The CPU reference executor: the passes' plain Rust references, run on
+//! all cores in the order the plans of [`crate::pipeline`] give. The
+//! yardstick the wgpu executor is tested against, and the fallback where
+//! the only adapter is a software rasteriser.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -13,8 +14,7 @@ use crate::passes::common::splat;
 use crate::passes::common::{crop, pushpull};
 use crate::passes::gffe::{background, bgfill, history, motion, warp};
 use crate::passes::interp::{reproject, resolve};
-use crate::pipeline::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
-use crate::settings::Method;
+use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapshot};
 
 /// One ingested frame.
 #[derive(Clone, Debug)]
@@ -34,6 +34,10 @@ pub struct CpuBackend {
     /// The frame before `current` (interpolation's α = 0).
     previous: Option<FrameState>,
     timings: Vec<PassTime>,
+    /// The generated frame being made.
+    out: Option<Output>,
+    /// GFFE's positions at α, between `motion` and `warp`.
+    next: Vec<[f32; 4]>,
 }
 
 fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
@@ -121,59 +125,7 @@ impl Backend for CpuBackend {
     }
 
     fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
-        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
-        let t = &mut self.timings;
-        t.retain(|p| matches!(p.pass, Pass::History | Pass::Background));
-        if job.method == Method::Interp {
-            return Ok(interpolate(cur, self.previous.as_ref(), job, t));
-        }
-        if job.method == Method::Repeat {
-            let mut out = timed(t, Pass::Crop, || {
-                crop::crop(
-                    &cur.frame.color,
-                    &cur.frame.depth,
-                    &cur.frame.motion,
-                    &job.crop,
-                )
-            });
-            out.motion.iter_mut().for_each(|m| *m = [0.0; 2]);
-            return Ok(out);
-        }
-        let next = timed(t, Pass::Motion, || {
-            motion::estimate(&cur.history.positions, &cur.history.track, cur.k, job.alpha)
-        });
-        let mut out = timed(t, Pass::Warp, || {
-            let cands = warp::project(&next, &job.target);
-            let winners =
-                splat::resolve(&cands, (job.target.width() * job.target.height()) as usize);
-            let mut out = Output::empty(job.target.width(), job.target.height());
-            warp::resolve(
-                &winners,
-                &cur.frame.color,
-                cur.camera.width(),
-                job.map,
-                &mut out,
-            );
-            warp::close_cracks(&mut out);
-            out
-        });
-        if cur.levels.count > 0 && job.bg_target.count == cur.levels.count {
-            timed(t, Pass::BgFill, || {
-                let cands =
-                    bgfill::project(&cur.background, cur.levels, &job.target, job.bg_target);
-                let winners = splat::resolve(&cands, job.bg_target.total() as usize);
-                bgfill::resolve(
-                    &winners,
-                    &cur.background,
-                    job.bg_target,
-                    &cur.camera,
-                    job.map,
-                    &mut out,
-                );
-            });
-        }
-        timed(t, Pass::Holes, || pushpull::fill(&mut out, job.pushpull));
-        Ok(out)
+        crate::pipeline::generate(self, job)
     }
 
     fn reset(&mut self) {
@@ -198,49 +150,133 @@ impl Backend for CpuBackend {
     }
 }
 
-/// GeoMotionGen between `previous` and `current` (module `interp`). Without
-/// a previous frame of the same size (first frame, restart, size change)
-/// the current frame is shown as it is.
-fn interpolate(
-    cur: &FrameState,
-    previous: Option<&FrameState>,
-    job: &Job,
-    t: &mut Vec<PassTime>,
-) -> Output {
-    let (w, h) = (cur.camera.width(), cur.camera.height());
-    let f = &cur.frame;
-    let Some(prev) = previous.filter(|p| p.frame.depth.len() == f.depth.len()) else {
-        let identity = crop::Crop {
-            source: (w, h),
-            origin: glam::Vec2::ZERO,
-            extent: glam::Vec2::new(w as f32, h as f32),
-            output: (w, h),
-        };
-        return timed(t, Pass::Crop, || {
-            crop::crop(&f.color, &f.depth, &f.motion, &identity)
+/// A frame's colour and depth, as interpolation's resolve reads them.
+fn image(s: &FrameState) -> resolve::Image<'_> {
+    resolve::Image {
+        color: &s.frame.color,
+        depth: &s.frame.depth,
+    }
+}
+
+impl CpuBackend {
+    /// The ingested frame, the output being made and the timings.
+    fn parts(
+        &mut self,
+    ) -> Result<(&FrameState, &mut Option<Output>, &mut Vec<PassTime>), FramegenError> {
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        Ok((cur, &mut self.out, &mut self.timings))
+    }
+
+    /// The output a previous pass of the plan made.
+    fn output(out: &mut Option<Output>) -> Result<&mut Output, FramegenError> {
+        out.as_mut()
+            .ok_or_else(|| FramegenError::Device("a pass ran before the output was made".into()))
+    }
+}
+
+impl Executor for CpuBackend {
+    fn begin(&mut self, _job: &Job) -> Result<(), FramegenError> {
+        self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        self.timings
+            .retain(|p| matches!(p.pass, Pass::History | Pass::Background));
+        self.out = None;
+        Ok(())
+    }
+
+    fn has_previous(&self) -> bool {
+        let len = |s: &FrameState| s.frame.depth.len();
+        matches!((&self.current, &self.previous), (Some(c), Some(p)) if len(c) == len(p))
+    }
+
+    fn crop(&mut self, c: &crop::Crop, still: bool) -> Result<(), FramegenError> {
+        let (cur, out, t) = self.parts()?;
+        let f = &cur.frame;
+        let mut o = timed(t, Pass::Crop, || {
+            crop::crop(&f.color, &f.depth, &f.motion, c)
         });
-    };
-    let mut out = timed(t, Pass::Reproject, || {
-        let uv = reproject::normalize(&f.motion, w, h);
-        let cands = reproject::project(&uv, &f.depth, w, h, job.alpha);
-        let winners = splat::resolve(&cands, f.depth.len());
-        let mut out = Output::empty(w, h);
-        reproject::merge(&winners, &uv, &f.depth, &mut out);
-        out
-    });
-    timed(t, Pass::Holes, || pushpull::fill(&mut out, job.pushpull));
-    timed(t, Pass::Resolve, || {
-        let (current, previous) = (
-            resolve::Image {
-                color: &cur.frame.color,
-                depth: &cur.frame.depth,
-            },
-            resolve::Image {
-                color: &prev.frame.color,
-                depth: &prev.frame.depth,
-            },
-        );
-        resolve::resolve(&mut out, current, previous, job.alpha);
-    });
-    out
+        if still {
+            o.motion.iter_mut().for_each(|m| *m = [0.0; 2]);
+        }
+        *out = Some(o);
+        Ok(())
+    }
+
+    fn motion(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let h = &cur.history;
+        self.next = timed(&mut self.timings, Pass::Motion, || {
+            motion::estimate(&h.positions, &h.track, cur.k, job.alpha)
+        });
+        Ok(())
+    }
+
+    fn warp(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let next = &self.next;
+        let out = timed(&mut self.timings, Pass::Warp, || {
+            let (w, h) = (job.target.width(), job.target.height());
+            let cands = warp::project(next, &job.target);
+            let winners = splat::resolve(&cands, (w * h) as usize);
+            let mut out = Output::empty(w, h);
+            let source_width = cur.camera.width();
+            warp::resolve(&winners, &cur.frame.color, source_width, job.map, &mut out);
+            warp::close_cracks(&mut out);
+            out
+        });
+        self.out = Some(out);
+        Ok(())
+    }
+
+    fn bgfill(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let (cur, out, t) = self.parts()?;
+        let out = Self::output(out)?;
+        timed(t, Pass::BgFill, || {
+            let cands = bgfill::project(&cur.background, cur.levels, &job.target, job.bg_target);
+            let winners = splat::resolve(&cands, job.bg_target.total() as usize);
+            let (bg, camera) = (&cur.background, &cur.camera);
+            bgfill::resolve(&winners, bg, job.bg_target, camera, job.map, out);
+        });
+        Ok(())
+    }
+
+    fn pushpull(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let (_, out, t) = self.parts()?;
+        let out = Self::output(out)?;
+        timed(t, Pass::Holes, || pushpull::fill(out, job.pushpull));
+        Ok(())
+    }
+
+    fn reproject(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let (cur, out, t) = self.parts()?;
+        let (w, h) = (cur.camera.width(), cur.camera.height());
+        let f = &cur.frame;
+        let o = timed(t, Pass::Reproject, || {
+            let uv = reproject::normalize(&f.motion, w, h);
+            let cands = reproject::project(&uv, &f.depth, w, h, job.alpha);
+            let winners = splat::resolve(&cands, f.depth.len());
+            let mut o = Output::empty(w, h);
+            reproject::merge(&winners, &uv, &f.depth, &mut o);
+            o
+        });
+        *out = Some(o);
+        Ok(())
+    }
+
+    fn resolve(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let prev = self.previous.as_ref().ok_or_else(|| {
+            FramegenError::Device("interpolation without a previous frame".into())
+        })?;
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let out = Self::output(&mut self.out)?;
+        timed(&mut self.timings, Pass::Resolve, || {
+            resolve::resolve(out, image(cur), image(prev), job.alpha);
+        });
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<Output, FramegenError> {
+        self.out
+            .take()
+            .ok_or_else(|| FramegenError::Device("no generated frame was made".into()))
+    }
 }

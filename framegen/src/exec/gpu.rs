@@ -1,5 +1,6 @@
-//! The wgpu backend: the same passes as [`crate::exec::cpu::CpuBackend`], as
-//! compute kernels over storage buffers. Per-pass wall times (submit +
+//! The wgpu executor: the same passes as [`crate::exec::cpu::CpuBackend`],
+//! as compute kernels over storage buffers, in the order the plans of
+//! [`crate::pipeline`] give. Per-pass wall times (submit +
 //! wait; lavapipe's timestamp queries are unreliable) are recorded when
 //! profiling is on; otherwise each ingest and each generation is one
 //! submission.
@@ -24,8 +25,7 @@ use crate::passes::gffe::motion::GpuMotion;
 use crate::passes::gffe::warp::{GpuOutput, GpuWarp};
 use crate::passes::interp::reproject::GpuReproject;
 use crate::passes::interp::resolve::{GpuImage, GpuResolve};
-use crate::pipeline::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
-use crate::settings::Method;
+use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapshot};
 
 /// Every kernel, compiled once.
 #[derive(Debug)]
@@ -173,6 +173,68 @@ pub struct GpuBackend {
     /// Timestamp queries for profiled passes (hardware adapters).
     timestamps: Option<Timestamps>,
     timings: Vec<PassTime>,
+    /// The buffers of the generated frame being made.
+    generation: Option<Generation>,
+    /// Passes recorded and not yet submitted.
+    encoder: Option<wgpu::CommandEncoder>,
+}
+
+/// The buffers one generated frame uses (handles into [`Scratch`]).
+#[derive(Debug)]
+struct Generation {
+    /// Output pixels and size.
+    tn: u32,
+    size: (u32, u32),
+    color: wgpu::Buffer,
+    depth: wgpu::Buffer,
+    motion: wgpu::Buffer,
+    mask: wgpu::Buffer,
+    keys: wgpu::Buffer,
+    winners: wgpu::Buffer,
+    candidates: wgpu::Buffer,
+    next: wgpu::Buffer,
+    pyramid: wgpu::Buffer,
+    layout: Levels,
+}
+
+impl FrameBuffers {
+    /// Colour and depth, as interpolation's resolve reads them.
+    fn image(&self) -> GpuImage<'_> {
+        GpuImage {
+            color: &self.color,
+            depth: &self.depth,
+        }
+    }
+}
+
+impl Generation {
+    /// The depth-tested splat of `sources` candidates into `slots` slots,
+    /// over this frame's candidate, key and winner buffers.
+    fn splat(&self, p: &PassInputs<'_>, enc: &mut wgpu::CommandEncoder, sources: u64, slots: u64) {
+        let (candidates, keys, winners) = (&self.candidates, &self.keys, &self.winners);
+        p.kernels
+            .splat
+            .encode(p.ctx, enc, candidates, sources, keys, winners, slots);
+    }
+
+    fn out(&self) -> GpuOutput<'_> {
+        GpuOutput {
+            color: &self.color,
+            depth: &self.depth,
+            motion: &self.motion,
+            mask: &self.mask,
+        }
+    }
+}
+
+/// What a generation pass records with.
+struct PassInputs<'a> {
+    ctx: &'a GpuContext,
+    kernels: &'a Kernels,
+    cur: &'a FrameBuffers,
+    /// The frame before `cur` at its size (interpolation).
+    prev: Option<&'a FrameBuffers>,
+    g: &'a Generation,
 }
 
 impl GpuBackend {
@@ -200,6 +262,8 @@ impl GpuBackend {
             profile: false,
             timestamps: None,
             timings: Vec::new(),
+            generation: None,
+            encoder: None,
         }
     }
 
@@ -237,27 +301,46 @@ impl GpuBackend {
         Ok(b)
     }
 
-    fn read_output(&self, n: u32) -> Result<Output, FramegenError> {
-        let s = &self.scratch;
-        let (Some(color), Some(depth), Some(motion), Some(mask)) =
-            (&s.color, &s.depth, &s.motion, &s.mask)
-        else {
-            return Err(FramegenError::Device("output buffers missing".into()));
+    /// Records one generation pass (submitting and timing it when
+    /// profiling).
+    fn record(
+        &mut self,
+        pass: Pass,
+        f: impl FnOnce(&PassInputs<'_>, &mut wgpu::CommandEncoder),
+    ) -> Result<(), FramegenError> {
+        let Self {
+            ctx,
+            kernels,
+            current,
+            spare,
+            profile,
+            timestamps,
+            timings,
+            generation,
+            encoder,
+            ..
+        } = self;
+        let cur = current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let g = generation
+            .as_ref()
+            .ok_or_else(|| FramegenError::Device("a pass ran before begin()".into()))?;
+        let inputs = PassInputs {
+            ctx,
+            kernels,
+            cur,
+            prev: spare.as_ref().filter(|p| p.n == cur.n),
+            g,
         };
-        let n = n as usize;
-        let _ = (color, depth, motion, mask);
-        Ok(Output {
-            width: 0,
-            height: 0,
-            color: bytemuck::cast_slice::<f32, [f32; 4]>(&self.ctx.read_pod::<f32>(color, n * 4)?)
-                .to_vec(),
-            depth: self.ctx.read_pod(depth, n)?,
-            motion: bytemuck::cast_slice::<f32, [f32; 2]>(
-                &self.ctx.read_pod::<f32>(motion, n * 2)?,
-            )
-            .to_vec(),
-            mask: self.ctx.read_pod(mask, n)?,
-        })
+        let mut rec = Recorder {
+            ctx,
+            profile: *profile,
+            timestamps: timestamps.as_ref(),
+            encoder: encoder.take(),
+            timings,
+        };
+        rec.pass(pass, |enc| f(&inputs, enc))?;
+        *encoder = rec.encoder.take();
+        Ok(())
     }
 }
 
@@ -280,7 +363,7 @@ impl Backend for GpuBackend {
         self.ctx
             .require_buffer("the generated frame's colour", tn * 16, true)?;
         let scope = self.ctx.scope("generating a frame");
-        let out = self.generate_in_scope(job);
+        let out = crate::pipeline::generate(self, job);
         scope.finish()?;
         out
     }
@@ -454,231 +537,194 @@ impl GpuBackend {
         self.current = Some(buffers);
         Ok(count)
     }
+}
 
-    fn generate_in_scope(&mut self, job: &Job) -> Result<Output, FramegenError> {
+impl Executor for GpuBackend {
+    fn begin(&mut self, job: &Job) -> Result<(), FramegenError> {
         let ctx = &*self.ctx;
         self.timings
             .retain(|p| matches!(p.pass, Pass::Upload | Pass::History | Pass::Background));
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         let (tw, th) = (job.target.width(), job.target.height());
         let tn = tw * th;
-        let Self {
-            kernels,
-            scratch,
-            spare,
-            ..
-        } = self;
-        let out_color = ensure(ctx, &mut scratch.color, "out color", u64::from(tn) * 16).clone();
-        let out_depth = ensure(ctx, &mut scratch.depth, "out depth", u64::from(tn) * 4).clone();
-        let out_motion = ensure(ctx, &mut scratch.motion, "out motion", u64::from(tn) * 8).clone();
-        let out_mask = ensure(ctx, &mut scratch.mask, "out mask", u64::from(tn) * 4).clone();
+        let s = &mut self.scratch;
         let slots = tn.max(job.bg_target.total());
-        let keys = ensure(ctx, &mut scratch.keys, "keys", u64::from(slots) * 4).clone();
-        let winners = ensure(ctx, &mut scratch.winners, "winners", u64::from(slots) * 4).clone();
-        let candidates = ensure(
-            ctx,
-            &mut scratch.candidates,
-            "candidates",
-            u64::from(cur.n.max(cur.levels.total())) * 8,
-        )
-        .clone();
-        let next = ensure(
-            ctx,
-            &mut scratch.next,
-            "next positions",
-            u64::from(cur.n) * 16,
-        )
-        .clone();
         let layout = pushpull::layout(tw, th, job.pushpull);
-        let pyramid = ensure(
-            ctx,
-            &mut scratch.pyramid,
-            "pyramid",
-            u64::from(layout.total()) * std::mem::size_of::<PpTexel>() as u64,
-        )
-        .clone();
-        let out = GpuOutput {
-            color: &out_color,
-            depth: &out_depth,
-            motion: &out_motion,
-            mask: &out_mask,
-        };
-        let mut rec = Recorder {
-            ctx,
-            profile: self.profile,
-            timestamps: self.timestamps.as_ref(),
-            encoder: None,
-            timings: &mut self.timings,
-        };
-        // The frame before `cur`, for interpolation (the ingest keeps it as
-        // the spare until the next frame arrives).
-        let previous = spare.as_ref().filter(|p| p.n == cur.n);
-        if job.method == Method::Interp && previous.is_none() {
-            let (w, h) = (cur.camera.width(), cur.camera.height());
-            let identity = Crop {
-                source: (w, h),
-                origin: glam::Vec2::ZERO,
-                extent: glam::Vec2::new(w as f32, h as f32),
-                output: (w, h),
-            };
-            rec.pass(Pass::Crop, |enc| {
-                kernels.crop.encode(
-                    ctx,
-                    enc,
-                    &identity,
-                    &cur.color,
-                    &cur.depth,
-                    &cur.motion,
-                    out,
-                );
-            })?;
-        } else if let (Method::Interp, Some(prev)) = (job.method, previous) {
-            let size = (cur.camera.width(), cur.camera.height());
-            rec.pass(Pass::Reproject, |enc| {
-                kernels.interp.encode_project(
-                    ctx,
-                    enc,
-                    size,
-                    job.alpha,
-                    &cur.motion,
-                    &cur.depth,
-                    &next,
-                    &candidates,
-                );
-                kernels.splat.encode(
-                    ctx,
-                    enc,
-                    &candidates,
-                    u64::from(cur.n),
-                    &keys,
-                    &winners,
-                    u64::from(cur.n),
-                );
-                kernels
-                    .interp
-                    .encode_merge(ctx, enc, size, &cur.depth, &winners, &next, out);
-            })?;
-            rec.pass(Pass::Holes, |enc| {
-                kernels.holes.encode(ctx, enc, out, &pyramid, layout);
-            })?;
-            rec.pass(Pass::Resolve, |enc| {
-                kernels.resolve.encode(
-                    ctx,
-                    enc,
-                    size,
-                    job.alpha,
-                    GpuImage {
-                        color: &cur.color,
-                        depth: &cur.depth,
-                    },
-                    GpuImage {
-                        color: &prev.color,
-                        depth: &prev.depth,
-                    },
-                    out,
-                );
-            })?;
-        } else if job.method == Method::Repeat {
-            rec.pass(Pass::Crop, |enc| {
-                kernels.crop.encode(
-                    ctx,
-                    enc,
-                    &job.crop,
-                    &cur.color,
-                    &cur.depth,
-                    &cur.motion,
-                    out,
-                );
-                enc.clear_buffer(&out_motion, 0, Some(u64::from(tn) * 8));
-            })?;
-        } else {
-            rec.pass(Pass::Motion, |enc| {
-                kernels.motion.encode(
-                    ctx,
-                    enc,
-                    &cur.positions,
-                    &cur.track,
-                    &next,
-                    cur.n,
-                    cur.k,
-                    job.alpha,
-                );
-            })?;
-            rec.pass(Pass::Warp, |enc| {
-                enc.clear_buffer(&out_mask, 0, Some(u64::from(tn) * 4));
-                kernels
-                    .warp
-                    .encode_project(ctx, enc, &job.target, &next, cur.n, &candidates);
-                kernels.splat.encode(
-                    ctx,
-                    enc,
-                    &candidates,
-                    u64::from(cur.n),
-                    &keys,
-                    &winners,
-                    u64::from(tn),
-                );
-                kernels.warp.encode_resolve(
-                    ctx,
-                    enc,
-                    &job.target,
-                    &cur.color,
-                    cur.camera.width(),
-                    job.map,
-                    &keys,
-                    &winners,
-                    out,
-                );
-            })?;
-            if cur.levels.count > 0 && job.bg_target.count == cur.levels.count {
-                rec.pass(Pass::BgFill, |enc| {
-                    let params = GpuBgFill::params(
-                        ctx,
-                        &job.target,
-                        &cur.camera,
-                        job.map,
-                        cur.levels,
-                        job.bg_target,
-                    );
-                    let texels = cur.levels.total();
-                    kernels.bgfill.encode_project(
-                        ctx,
-                        enc,
-                        &params,
-                        &cur.background,
-                        texels,
-                        &candidates,
-                    );
-                    kernels.splat.encode(
-                        ctx,
-                        enc,
-                        &candidates,
-                        u64::from(texels),
-                        &keys,
-                        &winners,
-                        u64::from(job.bg_target.total()),
-                    );
-                    kernels.bgfill.encode_resolve(
-                        ctx,
-                        enc,
-                        &params,
-                        &cur.background,
-                        &keys,
-                        &winners,
-                        out,
-                        tn,
-                    );
-                })?;
+        let pyramid_bytes = u64::from(layout.total()) * std::mem::size_of::<PpTexel>() as u64;
+        let sources = u64::from(cur.n.max(cur.levels.total()));
+        self.generation = Some(Generation {
+            tn,
+            size: (tw, th),
+            color: ensure(ctx, &mut s.color, "out color", u64::from(tn) * 16).clone(),
+            depth: ensure(ctx, &mut s.depth, "out depth", u64::from(tn) * 4).clone(),
+            motion: ensure(ctx, &mut s.motion, "out motion", u64::from(tn) * 8).clone(),
+            mask: ensure(ctx, &mut s.mask, "out mask", u64::from(tn) * 4).clone(),
+            keys: ensure(ctx, &mut s.keys, "keys", u64::from(slots) * 4).clone(),
+            winners: ensure(ctx, &mut s.winners, "winners", u64::from(slots) * 4).clone(),
+            candidates: ensure(ctx, &mut s.candidates, "candidates", sources * 8).clone(),
+            next: ensure(ctx, &mut s.next, "next positions", u64::from(cur.n) * 16).clone(),
+            pyramid: ensure(ctx, &mut s.pyramid, "pyramid", pyramid_bytes).clone(),
+            layout,
+        });
+        self.encoder = None;
+        Ok(())
+    }
+
+    fn has_previous(&self) -> bool {
+        matches!((&self.current, &self.spare), (Some(c), Some(p)) if c.n == p.n)
+    }
+
+    fn crop(&mut self, crop: &Crop, still: bool) -> Result<(), FramegenError> {
+        let crop = *crop;
+        self.record(Pass::Crop, |p, enc| {
+            let c = p.cur;
+            let out = p.g.out();
+            p.kernels
+                .crop
+                .encode(p.ctx, enc, &crop, &c.color, &c.depth, &c.motion, out);
+            if still {
+                enc.clear_buffer(&p.g.motion, 0, Some(u64::from(p.g.tn) * 8));
             }
-            rec.pass(Pass::Holes, |enc| {
-                kernels.holes.encode(ctx, enc, out, &pyramid, layout);
-            })?;
+        })
+    }
+
+    fn motion(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let alpha = job.alpha;
+        self.record(Pass::Motion, |p, enc| {
+            let c = p.cur;
+            p.kernels.motion.encode(
+                p.ctx,
+                enc,
+                &c.positions,
+                &c.track,
+                &p.g.next,
+                c.n,
+                c.k,
+                alpha,
+            );
+        })
+    }
+
+    fn warp(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let job = *job;
+        self.record(Pass::Warp, |p, enc| {
+            let (c, g, k) = (p.cur, p.g, p.kernels);
+            enc.clear_buffer(&g.mask, 0, Some(u64::from(g.tn) * 4));
+            k.warp
+                .encode_project(p.ctx, enc, &job.target, &g.next, c.n, &g.candidates);
+            g.splat(p, enc, u64::from(c.n), u64::from(g.tn));
+            k.warp.encode_resolve(
+                p.ctx,
+                enc,
+                &job.target,
+                &c.color,
+                c.camera.width(),
+                job.map,
+                &g.keys,
+                &g.winners,
+                g.out(),
+            );
+        })
+    }
+
+    fn bgfill(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let job = *job;
+        self.record(Pass::BgFill, |p, enc| {
+            let (c, g, k) = (p.cur, p.g, p.kernels);
+            let params = GpuBgFill::params(
+                p.ctx,
+                &job.target,
+                &c.camera,
+                job.map,
+                c.levels,
+                job.bg_target,
+            );
+            let texels = c.levels.total();
+            k.bgfill
+                .encode_project(p.ctx, enc, &params, &c.background, texels, &g.candidates);
+            g.splat(p, enc, u64::from(texels), u64::from(job.bg_target.total()));
+            k.bgfill.encode_resolve(
+                p.ctx,
+                enc,
+                &params,
+                &c.background,
+                &g.keys,
+                &g.winners,
+                g.out(),
+                g.tn,
+            );
+        })
+    }
+
+    fn pushpull(&mut self, _job: &Job) -> Result<(), FramegenError> {
+        self.record(Pass::Holes, |p, enc| {
+            let g = p.g;
+            p.kernels
+                .holes
+                .encode(p.ctx, enc, g.out(), &g.pyramid, g.layout);
+        })
+    }
+
+    fn reproject(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let alpha = job.alpha;
+        self.record(Pass::Reproject, |p, enc| {
+            let (c, g, k) = (p.cur, p.g, p.kernels);
+            let size = (c.camera.width(), c.camera.height());
+            k.interp.encode_project(
+                p.ctx,
+                enc,
+                size,
+                alpha,
+                &c.motion,
+                &c.depth,
+                &g.next,
+                &g.candidates,
+            );
+            g.splat(p, enc, u64::from(c.n), u64::from(c.n));
+            k.interp
+                .encode_merge(p.ctx, enc, size, &c.depth, &g.winners, &g.next, g.out());
+        })
+    }
+
+    fn resolve(&mut self, job: &Job) -> Result<(), FramegenError> {
+        if !self.has_previous() {
+            return Err(FramegenError::Device(
+                "interpolation without a previous frame".into(),
+            ));
         }
-        rec.flush()?;
+        let alpha = job.alpha;
+        self.record(Pass::Resolve, |p, enc| {
+            let c = p.cur;
+            let Some(prev) = p.prev else { return };
+            let size = (c.camera.width(), c.camera.height());
+            p.kernels
+                .resolve
+                .encode(p.ctx, enc, size, alpha, c.image(), prev.image(), p.g.out());
+        })
+    }
+
+    fn finish(&mut self) -> Result<Output, FramegenError> {
+        if let Some(encoder) = self.encoder.take() {
+            self.ctx.queue.submit([encoder.finish()]);
+            self.ctx.wait()?;
+        }
+        let g = self
+            .generation
+            .take()
+            .ok_or_else(|| FramegenError::Device("finish() before begin()".into()))?;
         let start = Instant::now();
-        let mut output = self.read_output(tn)?;
-        output.width = tw;
-        output.height = th;
+        let n = g.tn as usize;
+        let ctx = &self.ctx;
+        let output = Output {
+            width: g.size.0,
+            height: g.size.1,
+            color: bytemuck::cast_slice::<f32, [f32; 4]>(&ctx.read_pod::<f32>(&g.color, n * 4)?)
+                .to_vec(),
+            depth: ctx.read_pod(&g.depth, n)?,
+            motion: bytemuck::cast_slice::<f32, [f32; 2]>(&ctx.read_pod::<f32>(&g.motion, n * 2)?)
+                .to_vec(),
+            mask: ctx.read_pod(&g.mask, n)?,
+        };
         if self.profile {
             self.timings.push(PassTime {
                 pass: Pass::Readback,

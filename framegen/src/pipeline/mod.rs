@@ -119,6 +119,72 @@ pub struct Job {
     pub crop: Crop,
 }
 
+/// The generation passes, one method per pass, as an executor runs them on
+/// the last ingested frame. [`generate`] calls them in each method's order;
+/// a new pass is one method here, one implementation per executor, and one
+/// line in the plans that use it.
+pub trait Executor {
+    /// Starts a generated frame for `job` (the GPU executor sizes its
+    /// buffers).
+    fn begin(&mut self, job: &Job) -> Result<(), FramegenError>;
+    /// Whether the frame before the last ingested one is kept, at its size
+    /// (interpolation's α = 0).
+    fn has_previous(&self) -> bool;
+    /// The rendered frame's region `crop`, resampled into the output;
+    /// `still` zeroes the motion (repeat shows a still frame).
+    fn crop(&mut self, crop: &Crop, still: bool) -> Result<(), FramegenError>;
+    /// GFFE eq. 1: every pixel's position at α.
+    fn motion(&mut self, job: &Job) -> Result<(), FramegenError>;
+    /// Forward warp of those positions into the output (project, splat,
+    /// resolve, crack closing).
+    fn warp(&mut self, job: &Job) -> Result<(), FramegenError>;
+    /// The background layers projected into the output's holes.
+    fn bgfill(&mut self, job: &Job) -> Result<(), FramegenError>;
+    /// Push-pull fill of the output's remaining holes.
+    fn pushpull(&mut self, job: &Job) -> Result<(), FramegenError>;
+    /// GeoMotionGen normalize + reproject + merge into the output.
+    fn reproject(&mut self, job: &Job) -> Result<(), FramegenError>;
+    /// GeoMotionGen resolve: colour from the current or previous frame.
+    fn resolve(&mut self, job: &Job) -> Result<(), FramegenError>;
+    /// Ends the frame and hands the output over (the GPU executor submits,
+    /// waits and reads back).
+    fn finish(&mut self) -> Result<Output, FramegenError>;
+}
+
+/// Every method's generation plan, written once for both executors.
+pub fn generate<E: Executor + ?Sized>(e: &mut E, job: &Job) -> Result<Output, FramegenError> {
+    e.begin(job)?;
+    match job.method {
+        Method::Repeat => e.crop(&job.crop, true)?,
+        // Without the frame before (first frame, restart, size change)
+        // interpolation shows the current frame as it is.
+        Method::Interp if !e.has_previous() => {
+            let (w, h) = (job.current.width(), job.current.height());
+            let whole = Crop {
+                source: (w, h),
+                origin: glam::Vec2::ZERO,
+                extent: glam::Vec2::new(w as f32, h as f32),
+                output: (w, h),
+            };
+            e.crop(&whole, false)?;
+        }
+        Method::Interp => {
+            e.reproject(job)?;
+            e.pushpull(job)?;
+            e.resolve(job)?;
+        }
+        Method::Reproject | Method::Gffe => {
+            e.motion(job)?;
+            e.warp(job)?;
+            if job.bg_source.count > 0 && job.bg_target.count == job.bg_source.count {
+                e.bgfill(job)?;
+            }
+            e.pushpull(job)?;
+        }
+    }
+    e.finish()
+}
+
 /// Runs the passes.
 pub trait Backend: Send {
     /// Takes a sanitised rendered frame: history tracking and background
