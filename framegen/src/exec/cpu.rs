@@ -27,6 +27,16 @@ struct FrameState {
     background: Vec<background::Texel>,
 }
 
+/// A rendered frame being ingested (between `upload` and `ingested`).
+#[derive(Debug)]
+struct Ingest {
+    /// What the frame will be once ingested (its history and background
+    /// filled in by the passes).
+    state: FrameState,
+    /// The previous frame with its camera, when the history continues.
+    prev: Option<(crate::passes::common::camera::PassCamera, FrameState)>,
+}
+
 /// The CPU reference backend.
 #[derive(Debug, Default)]
 pub struct CpuBackend {
@@ -34,6 +44,8 @@ pub struct CpuBackend {
     /// The frame before `current` (interpolation's α = 0).
     previous: Option<FrameState>,
     timings: Vec<PassTime>,
+    /// The rendered frame being ingested.
+    ingest: Option<Ingest>,
     /// The generated frame being made.
     out: Option<Output>,
     /// GFFE's positions at α, between `motion` and `warp`.
@@ -53,75 +65,7 @@ fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T
 
 impl Backend for CpuBackend {
     fn ingest(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<u32, FramegenError> {
-        self.timings.clear();
-        let t = &mut self.timings;
-        let prev = if plan.prev.is_some() {
-            self.current.take()
-        } else {
-            None
-        };
-        let prev_history = prev.as_ref().zip(plan.prev).and_then(|(p, camera)| {
-            (p.k == plan.k).then_some(history::PrevHistory {
-                camera,
-                positions: &p.history.positions,
-                track: &p.history.track,
-            })
-        });
-        // k = 0 (repeat): nothing to track or collect.
-        let hist = if plan.k == 0 {
-            history::History {
-                positions: Vec::new(),
-                track: Vec::new(),
-                dynamic: 0,
-            }
-        } else {
-            timed(t, Pass::History, || {
-                history::track(
-                    &plan.camera,
-                    &frame.depth,
-                    &frame.motion,
-                    prev_history,
-                    plan.k,
-                    plan.epsilon,
-                    plan.tolerance,
-                )
-            })
-        };
-        let n = frame.depth.len();
-        let prev_bg = prev
-            .as_ref()
-            .zip(plan.prev)
-            .map(|(p, camera)| background::PrevBackground {
-                camera,
-                levels: p.levels,
-                texels: &p.background,
-            });
-        let bg = if plan.k == 0 {
-            Vec::new()
-        } else {
-            timed(t, Pass::Background, || {
-                background::collect(
-                    &plan.camera,
-                    &hist.positions[..n],
-                    &hist.track,
-                    &frame.color,
-                    plan.levels,
-                    prev_bg,
-                    plan.tolerance,
-                )
-            })
-        };
-        let dynamic = hist.dynamic;
-        self.previous = prev;
-        self.current = Some(FrameState {
-            camera: plan.camera,
-            frame: frame.clone(),
-            history: hist,
-            k: plan.k,
-            levels: plan.levels,
-            background: bg,
-        });
-        Ok(dynamic)
+        crate::pipeline::ingest(self, frame, plan)
     }
 
     fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
@@ -150,6 +94,13 @@ impl Backend for CpuBackend {
     }
 }
 
+/// The frame being ingested.
+fn ingesting(ingest: &mut Option<Ingest>) -> Result<&mut Ingest, FramegenError> {
+    ingest
+        .as_mut()
+        .ok_or_else(|| FramegenError::Device("an ingest pass ran before upload()".into()))
+}
+
 /// A frame's colour and depth, as interpolation's resolve reads them.
 fn image(s: &FrameState) -> resolve::Image<'_> {
     resolve::Image {
@@ -175,6 +126,94 @@ impl CpuBackend {
 }
 
 impl Executor for CpuBackend {
+    fn upload(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<(), FramegenError> {
+        self.timings.clear();
+        let prev = match plan.prev {
+            Some(camera) => self.current.take().map(|p| (camera, p)),
+            None => None,
+        };
+        self.ingest = Some(Ingest {
+            state: FrameState {
+                camera: plan.camera,
+                frame: frame.clone(),
+                // k = 0 (repeat): nothing tracked, nothing collected.
+                history: history::History {
+                    positions: Vec::new(),
+                    track: Vec::new(),
+                    dynamic: 0,
+                },
+                k: plan.k,
+                levels: plan.levels,
+                background: Vec::new(),
+            },
+            prev,
+        });
+        Ok(())
+    }
+
+    fn history(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
+        let i = ingesting(&mut self.ingest)?;
+        let prev = i.prev.as_ref().filter(|(_, p)| p.k == plan.k);
+        let prev = prev.map(|(camera, p)| history::PrevHistory {
+            camera: *camera,
+            positions: &p.history.positions,
+            track: &p.history.track,
+        });
+        let f = &i.state.frame;
+        i.state.history = timed(&mut self.timings, Pass::History, || {
+            let (k, epsilon, tolerance) = (plan.k, plan.epsilon, plan.tolerance);
+            history::track(
+                &plan.camera,
+                &f.depth,
+                &f.motion,
+                prev,
+                k,
+                epsilon,
+                tolerance,
+            )
+        });
+        Ok(())
+    }
+
+    fn background(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
+        let i = ingesting(&mut self.ingest)?;
+        let prev = i
+            .prev
+            .as_ref()
+            .map(|(camera, p)| background::PrevBackground {
+                camera: *camera,
+                levels: p.levels,
+                texels: &p.background,
+            });
+        let n = i.state.frame.depth.len();
+        let (h, color) = (&i.state.history, &i.state.frame.color);
+        i.state.background = timed(&mut self.timings, Pass::Background, || {
+            let p0 = &h.positions[..n];
+            let tolerance = plan.tolerance;
+            background::collect(
+                &plan.camera,
+                p0,
+                &h.track,
+                color,
+                plan.levels,
+                prev,
+                tolerance,
+            )
+        });
+        Ok(())
+    }
+
+    fn ingested(&mut self) -> Result<u32, FramegenError> {
+        let i = self
+            .ingest
+            .take()
+            .ok_or_else(|| FramegenError::Device("ingested() before upload()".into()))?;
+        let dynamic = i.state.history.dynamic;
+        self.previous = i.prev.map(|(_, p)| p);
+        self.current = Some(i.state);
+        Ok(dynamic)
+    }
+
     fn begin(&mut self, _job: &Job) -> Result<(), FramegenError> {
         self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         self.timings

@@ -106,26 +106,30 @@ fn ensure<'a>(
     slot.as_ref().expect("just allocated")
 }
 
-/// Records passes into one submission, or one per pass when profiling.
-struct Recorder<'a> {
-    ctx: &'a GpuContext,
+/// Records passes into one submission, or one per pass (waited for and
+/// timed) when profiling.
+#[derive(Debug, Default)]
+struct Recorder {
     profile: bool,
-    timestamps: Option<&'a Timestamps>,
+    /// Timestamp queries for profiled passes (hardware adapters).
+    timestamps: Option<Timestamps>,
+    /// Passes recorded and not yet submitted.
     encoder: Option<wgpu::CommandEncoder>,
-    timings: &'a mut Vec<PassTime>,
+    timings: Vec<PassTime>,
 }
 
-impl Recorder<'_> {
+impl Recorder {
     fn pass(
         &mut self,
+        ctx: &GpuContext,
         pass: Pass,
         f: impl FnOnce(&mut wgpu::CommandEncoder),
     ) -> Result<(), FramegenError> {
         let start = Instant::now();
         let encoder = self
             .encoder
-            .get_or_insert_with(|| self.ctx.device.create_command_encoder(&Default::default()));
-        let timestamps = self.timestamps.filter(|_| self.profile);
+            .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
+        let timestamps = self.timestamps.as_ref().filter(|_| self.profile);
         if let Some(ts) = timestamps {
             ts.begin(encoder);
         }
@@ -134,31 +138,38 @@ impl Recorder<'_> {
             ts.end(encoder);
         }
         if self.profile {
-            self.flush()?;
+            self.flush(ctx)?;
             let time = start.elapsed();
-            let gpu = timestamps.map(|ts| ts.read(self.ctx)).transpose()?;
+            let timestamps = self.timestamps.as_ref();
+            let gpu = timestamps.map(|ts| ts.read(ctx)).transpose()?;
             self.timings.push(PassTime { pass, time, gpu });
         }
         Ok(())
     }
 
-    /// [`Recorder::pass`] when `run`, else nothing (and no timing).
-    fn pass_if(
-        &mut self,
-        run: bool,
-        pass: Pass,
-        f: impl FnOnce(&mut wgpu::CommandEncoder),
-    ) -> Result<(), FramegenError> {
-        if run { self.pass(pass, f) } else { Ok(()) }
-    }
-
-    fn flush(&mut self) -> Result<(), FramegenError> {
+    /// Submits what was recorded and waits for it.
+    fn flush(&mut self, ctx: &GpuContext) -> Result<(), FramegenError> {
         if let Some(encoder) = self.encoder.take() {
-            self.ctx.queue.submit([encoder.finish()]);
-            self.ctx.wait()?;
+            ctx.queue.submit([encoder.finish()]);
+            ctx.wait()?;
         }
         Ok(())
     }
+}
+
+/// A rendered frame being ingested (between `upload` and `ingested`).
+#[derive(Debug)]
+struct Ingest {
+    buffers: FrameBuffers,
+    /// The previous frame with its camera, when the history continues.
+    prev: Option<(PassCamera, FrameBuffers)>,
+    /// Whether the plan continues the history and tracks (the dynamic
+    /// count is read back only then).
+    counted: bool,
+    keys: wgpu::Buffer,
+    winners: wgpu::Buffer,
+    candidates: wgpu::Buffer,
+    dynamic: wgpu::Buffer,
 }
 
 /// The wgpu backend.
@@ -169,14 +180,11 @@ pub struct GpuBackend {
     current: Option<FrameBuffers>,
     spare: Option<FrameBuffers>,
     scratch: Scratch,
-    profile: bool,
-    /// Timestamp queries for profiled passes (hardware adapters).
-    timestamps: Option<Timestamps>,
-    timings: Vec<PassTime>,
+    rec: Recorder,
+    /// The rendered frame being ingested.
+    ingest: Option<Ingest>,
     /// The buffers of the generated frame being made.
     generation: Option<Generation>,
-    /// Passes recorded and not yet submitted.
-    encoder: Option<wgpu::CommandEncoder>,
 }
 
 /// The buffers one generated frame uses (handles into [`Scratch`]).
@@ -198,6 +206,14 @@ struct Generation {
 }
 
 impl FrameBuffers {
+    /// Positions and track words, as the history pass reads and writes them.
+    fn history(&self) -> GpuHistoryBuffers<'_> {
+        GpuHistoryBuffers {
+            positions: &self.positions,
+            track: &self.track,
+        }
+    }
+
     /// Colour and depth, as interpolation's resolve reads them.
     fn image(&self) -> GpuImage<'_> {
         GpuImage {
@@ -259,11 +275,9 @@ impl GpuBackend {
             current: None,
             spare: None,
             scratch: Scratch::default(),
-            profile: false,
-            timestamps: None,
-            timings: Vec::new(),
+            rec: Recorder::default(),
+            ingest: None,
             generation: None,
-            encoder: None,
         }
     }
 
@@ -284,10 +298,10 @@ impl GpuBackend {
         clock: PassClock,
     ) -> Result<Self, (Self, FramegenError)> {
         let mut b = Self::new(ctx);
-        b.profile = true;
+        b.rec.profile = true;
         if clock == PassClock::Timestamps {
             match Timestamps::new(&b.ctx) {
-                Some(ts) => b.timestamps = Some(ts),
+                Some(ts) => b.rec.timestamps = Some(ts),
                 None => {
                     let why = FramegenError::Device(format!(
                         "{} lacks {:?}",
@@ -313,11 +327,8 @@ impl GpuBackend {
             kernels,
             current,
             spare,
-            profile,
-            timestamps,
-            timings,
             generation,
-            encoder,
+            rec,
             ..
         } = self;
         let cur = current.as_ref().ok_or(FramegenError::NoFrame)?;
@@ -331,16 +342,26 @@ impl GpuBackend {
             prev: spare.as_ref().filter(|p| p.n == cur.n),
             g,
         };
-        let mut rec = Recorder {
+        rec.pass(ctx, pass, |enc| f(&inputs, enc))
+    }
+
+    /// Records one ingest pass over the frame being ingested.
+    fn record_ingest(
+        &mut self,
+        pass: Pass,
+        f: impl FnOnce(&Kernels, &Ingest, &mut wgpu::CommandEncoder),
+    ) -> Result<(), FramegenError> {
+        let Self {
             ctx,
-            profile: *profile,
-            timestamps: timestamps.as_ref(),
-            encoder: encoder.take(),
-            timings,
-        };
-        rec.pass(pass, |enc| f(&inputs, enc))?;
-        *encoder = rec.encoder.take();
-        Ok(())
+            kernels,
+            ingest,
+            rec,
+            ..
+        } = self;
+        let i = ingest
+            .as_ref()
+            .ok_or_else(|| FramegenError::Device("an ingest pass ran before upload()".into()))?;
+        rec.pass(ctx, pass, |enc| f(kernels, i, enc))
     }
 }
 
@@ -353,7 +374,7 @@ impl Backend for GpuBackend {
         self.ctx
             .require_buffer(&what, n * u64::from(plan.k.max(1)) * 16, true)?;
         let scope = self.ctx.scope("ingesting a frame");
-        let out = self.ingest_in_scope(frame, plan);
+        let out = crate::pipeline::ingest(self, frame, plan);
         scope.finish()?;
         out
     }
@@ -375,7 +396,7 @@ impl Backend for GpuBackend {
     }
 
     fn timings(&self) -> Vec<PassTime> {
-        self.timings.clone()
+        self.rec.timings.clone()
     }
 
     fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError> {
@@ -409,13 +430,10 @@ impl Backend for GpuBackend {
     }
 }
 
-impl GpuBackend {
-    fn ingest_in_scope(
-        &mut self,
-        frame: &Prepared,
-        plan: &IngestPlan,
-    ) -> Result<u32, FramegenError> {
-        self.timings.clear();
+impl Executor for GpuBackend {
+    fn upload(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<(), FramegenError> {
+        self.rec.timings.clear();
+        self.rec.encoder = None;
         let ctx = &*self.ctx;
         let n = frame.depth.len() as u32;
         let start = Instant::now();
@@ -425,16 +443,14 @@ impl GpuBackend {
             _ => FrameBuffers::new(ctx, n, plan.k, plan.levels, plan.camera),
         };
         buffers.camera = plan.camera;
-        ctx.queue
-            .write_buffer(&buffers.color, 0, bytemuck::cast_slice(&frame.color));
-        ctx.queue
-            .write_buffer(&buffers.depth, 0, bytemuck::cast_slice(&frame.depth));
-        ctx.queue
-            .write_buffer(&buffers.motion, 0, bytemuck::cast_slice(&frame.motion));
-        if self.profile {
-            ctx.queue.submit([]);
+        let queue = &ctx.queue;
+        queue.write_buffer(&buffers.color, 0, bytemuck::cast_slice(&frame.color));
+        queue.write_buffer(&buffers.depth, 0, bytemuck::cast_slice(&frame.depth));
+        queue.write_buffer(&buffers.motion, 0, bytemuck::cast_slice(&frame.motion));
+        if self.rec.profile {
+            queue.submit([]);
             ctx.wait()?;
-            self.timings.push(PassTime {
+            self.rec.timings.push(PassTime {
                 pass: Pass::Upload,
                 time: start.elapsed(),
                 gpu: None,
@@ -444,105 +460,88 @@ impl GpuBackend {
             Some(camera) => self.current.take().map(|b| (camera, b)),
             None => None,
         };
-        let Self {
-            kernels, scratch, ..
-        } = self;
-        let dynamic = ensure(ctx, &mut scratch.dynamic, "dynamic count", 16);
-        let max_prev = prev.as_ref().map_or(0, |(_, p)| p.levels.len(0));
-        let keys = ensure(
-            ctx,
-            &mut scratch.keys,
-            "keys",
-            u64::from(plan.levels.total().max(n)) * 4,
-        )
-        .clone();
-        let winners = ensure(
-            ctx,
-            &mut scratch.winners,
-            "winners",
-            u64::from(plan.levels.total().max(n)) * 4,
-        )
-        .clone();
-        let candidates = ensure(
-            ctx,
-            &mut scratch.candidates,
-            "candidates",
-            u64::from(max_prev.max(n)) * 8,
-        )
-        .clone();
-        let dynamic = dynamic.clone();
-        let mut rec = Recorder {
-            ctx,
-            profile: self.profile,
-            timestamps: self.timestamps.as_ref(),
-            encoder: None,
-            timings: &mut self.timings,
-        };
-        // k = 0 (repeat): nothing to track or collect.
-        let tracked = plan.k > 0;
-        rec.pass_if(tracked, Pass::History, |enc| {
-            enc.clear_buffer(&dynamic, 0, None);
-            let prev_h = prev
-                .as_ref()
-                .filter(|(_, p)| p.k == plan.k)
-                .map(|(cam, p)| {
-                    (
-                        cam,
-                        GpuHistoryBuffers {
-                            positions: &p.positions,
-                            track: &p.track,
-                        },
-                    )
-                });
-            kernels.history.encode(
-                ctx,
+        let s = &mut self.scratch;
+        let slots = u64::from(plan.levels.total().max(n)) * 4;
+        let sources = u64::from(prev.as_ref().map_or(0, |(_, p)| p.levels.len(0)).max(n)) * 8;
+        self.ingest = Some(Ingest {
+            buffers,
+            prev,
+            counted: plan.prev.is_some() && plan.k > 0,
+            keys: ensure(ctx, &mut s.keys, "keys", slots).clone(),
+            winners: ensure(ctx, &mut s.winners, "winners", slots).clone(),
+            candidates: ensure(ctx, &mut s.candidates, "candidates", sources).clone(),
+            dynamic: ensure(ctx, &mut s.dynamic, "dynamic count", 16).clone(),
+        });
+        Ok(())
+    }
+
+    fn history(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
+        let plan = *plan;
+        let ctx = self.ctx.clone();
+        self.record_ingest(Pass::History, |k, i, enc| {
+            enc.clear_buffer(&i.dynamic, 0, None);
+            let prev = i.prev.as_ref().filter(|(_, p)| p.k == plan.k);
+            let b = &i.buffers;
+            k.history.encode(
+                &ctx,
                 enc,
                 &plan.camera,
-                &buffers.depth,
-                &buffers.motion,
-                prev_h,
-                GpuHistoryBuffers {
-                    positions: &buffers.positions,
-                    track: &buffers.track,
-                },
-                &dynamic,
+                &b.depth,
+                &b.motion,
+                prev.map(|(cam, p)| (cam, p.history())),
+                b.history(),
+                &i.dynamic,
                 plan.k,
                 plan.epsilon,
                 plan.tolerance,
             );
-        })?;
-        rec.pass_if(tracked, Pass::Background, |enc| {
-            kernels.background.encode(
-                ctx,
+        })
+    }
+
+    fn background(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
+        let plan = *plan;
+        let ctx = self.ctx.clone();
+        self.record_ingest(Pass::Background, |k, i, enc| {
+            let b = &i.buffers;
+            k.background.encode(
+                &ctx,
                 enc,
-                &kernels.splat,
+                &k.splat,
                 &plan.camera,
-                &buffers.positions,
-                &buffers.track,
-                &buffers.color,
+                &b.positions,
+                &b.track,
+                &b.color,
                 plan.levels,
-                prev.as_ref().map(|(cam, p)| (cam, p.levels, &p.background)),
-                &buffers.background,
-                (&keys, &winners, &candidates),
+                i.prev
+                    .as_ref()
+                    .map(|(cam, p)| (cam, p.levels, &p.background)),
+                &b.background,
+                (&i.keys, &i.winners, &i.candidates),
                 plan.tolerance,
             );
-        })?;
-        rec.flush()?;
-        let count = if plan.prev.is_some() && tracked {
-            ctx.read_pod::<u32>(&dynamic, 1)?[0]
+        })
+    }
+
+    fn ingested(&mut self) -> Result<u32, FramegenError> {
+        self.rec.flush(&self.ctx)?;
+        let i = self
+            .ingest
+            .take()
+            .ok_or_else(|| FramegenError::Device("ingested() before upload()".into()))?;
+        let count = if i.counted {
+            self.ctx.read_pod::<u32>(&i.dynamic, 1)?[0]
         } else {
             0
         };
-        self.spare = prev.map(|(_, b)| b);
-        self.current = Some(buffers);
+        self.spare = i.prev.map(|(_, b)| b);
+        self.current = Some(i.buffers);
         Ok(count)
     }
-}
 
-impl Executor for GpuBackend {
     fn begin(&mut self, job: &Job) -> Result<(), FramegenError> {
         let ctx = &*self.ctx;
-        self.timings
+        self.rec
+            .timings
             .retain(|p| matches!(p.pass, Pass::Upload | Pass::History | Pass::Background));
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         let (tw, th) = (job.target.width(), job.target.height());
@@ -566,7 +565,7 @@ impl Executor for GpuBackend {
             pyramid: ensure(ctx, &mut s.pyramid, "pyramid", pyramid_bytes).clone(),
             layout,
         });
-        self.encoder = None;
+        self.rec.encoder = None;
         Ok(())
     }
 
@@ -704,10 +703,7 @@ impl Executor for GpuBackend {
     }
 
     fn finish(&mut self) -> Result<Output, FramegenError> {
-        if let Some(encoder) = self.encoder.take() {
-            self.ctx.queue.submit([encoder.finish()]);
-            self.ctx.wait()?;
-        }
+        self.rec.flush(&self.ctx)?;
         let g = self
             .generation
             .take()
@@ -725,8 +721,8 @@ impl Executor for GpuBackend {
                 .to_vec(),
             mask: ctx.read_pod(&g.mask, n)?,
         };
-        if self.profile {
-            self.timings.push(PassTime {
+        if self.rec.profile {
+            self.rec.timings.push(PassTime {
                 pass: Pass::Readback,
                 time: start.elapsed(),
                 gpu: None,

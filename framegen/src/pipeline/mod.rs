@@ -1,10 +1,10 @@
-//! The contract between the generator and the backends that run the
-//! passes: what ingesting a rendered frame and making one generated frame
-//! ask for ([`IngestPlan`], [`Job`]), the backend trait, the pass names of
-//! timings, and the history snapshot the parity tests compare. Kept apart
-//! from the generator so that the generator and each executor depend on
-//! it, never on each other (DESIGN §2: `pipeline/`, where each method's plan,
-//! written once over an executor trait, is to live).
+//! The contract between the generator and the executors that run the
+//! passes, and every method's plan, written once: what ingesting a rendered
+//! frame and making one generated frame ask for ([`IngestPlan`], [`Job`]),
+//! the passes an executor offers ([`Executor`]), the plans that call them in
+//! each method's order ([`ingest`], [`generate`]), the pass names of
+//! timings, and the history snapshot the parity tests compare. The generator
+//! and each executor depend on this module, never on each other (DESIGN §2).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -124,6 +124,18 @@ pub struct Job {
 /// a new pass is one method here, one implementation per executor, and one
 /// line in the plans that use it.
 pub trait Executor {
+    /// Takes a sanitised rendered frame (the GPU executor uploads it), with
+    /// the frame before it when `plan.prev` continues the history.
+    fn upload(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<(), FramegenError>;
+    /// GFFE Alg. 1: positions, static test, trajectories (`k = 1`: this
+    /// frame's positions and the static test only).
+    fn history(&mut self, plan: &IngestPlan) -> Result<(), FramegenError>;
+    /// GFFE §4.2: the background layers.
+    fn background(&mut self, plan: &IngestPlan) -> Result<(), FramegenError>;
+    /// Ends the ingest: the frame becomes the one generation starts from.
+    /// Returns the number of pixels that failed the static test (0 without
+    /// a previous frame or tracking).
+    fn ingested(&mut self) -> Result<u32, FramegenError>;
     /// Starts a generated frame for `job` (the GPU executor sizes its
     /// buffers).
     fn begin(&mut self, job: &Job) -> Result<(), FramegenError>;
@@ -149,6 +161,22 @@ pub trait Executor {
     /// Ends the frame and hands the output over (the GPU executor submits,
     /// waits and reads back).
     fn finish(&mut self) -> Result<Output, FramegenError>;
+}
+
+/// Every method's ingest plan, written once for both executors: a method
+/// that tracks (all but repeat) runs the history and background passes
+/// (the background pass collects nothing at `L = 0`).
+pub fn ingest<E: Executor + ?Sized>(
+    e: &mut E,
+    frame: &Arc<Prepared>,
+    plan: &IngestPlan,
+) -> Result<u32, FramegenError> {
+    e.upload(frame, plan)?;
+    if plan.k > 0 {
+        e.history(plan)?;
+        e.background(plan)?;
+    }
+    e.ingested()
 }
 
 /// Every method's generation plan, written once for both executors.
