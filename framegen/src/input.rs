@@ -52,22 +52,11 @@ pub struct Prepared {
 /// Converts and sanitises a frame's buffers.
 pub fn prepare(frame: &Frame) -> Prepared {
     use rayon::prelude::*;
-    // On all cores: each value is replaced on its own and the replacements
-    // are counted as integers, so the result does not depend on threads.
-    let bad = |v: f32| u64::from(!v.is_finite());
-    let s = Sanitized {
-        color: frame
-            .color
-            .par_iter()
-            .map(|c| c.iter().take(3).map(|v| bad(v.to_f32())).sum::<u64>())
-            .sum(),
-        depth: frame
-            .depth
-            .par_iter()
-            .filter(|&&d| d.is_nan() || d <= 0.0)
-            .count() as u64,
-        motion: frame.motion.par_iter().map(|m| bad(m[0]) + bad(m[1])).sum(),
-    };
+    use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+    // On all cores, in one pass per buffer: each value is replaced on its
+    // own and the (rare) replacements are counted as integers, so the result
+    // does not depend on the thread count.
+    let [bad_color, bad_depth, bad_motion] = [(); 3].map(|()| AtomicU64::new(0));
     let color = frame
         .color
         .par_iter()
@@ -77,6 +66,8 @@ pub fn prepare(frame: &Frame) -> Prepared {
                 let v = v.to_f32();
                 if v.is_finite() {
                     *o = v.clamp(0.0, MAX_RADIANCE);
+                } else {
+                    bad_color.fetch_add(1, Relaxed);
                 }
             }
             out
@@ -85,7 +76,14 @@ pub fn prepare(frame: &Frame) -> Prepared {
     let depth: Vec<f32> = frame
         .depth
         .par_iter()
-        .map(|&d| if d > 0.0 { d } else { 0.0 })
+        .map(|&d| {
+            if d > 0.0 {
+                d
+            } else {
+                bad_depth.fetch_add(1, Relaxed);
+                0.0
+            }
+        })
         .collect();
     let limit = 4.0 * frame.meta.size.width.max(frame.meta.size.height) as f32;
     let motion = frame
@@ -96,11 +94,17 @@ pub fn prepare(frame: &Frame) -> Prepared {
                 if v.is_finite() {
                     v.clamp(-limit, limit)
                 } else {
+                    bad_motion.fetch_add(1, Relaxed);
                     0.0
                 }
             })
         })
         .collect();
+    let s = Sanitized {
+        color: bad_color.into_inner(),
+        depth: bad_depth.into_inner(),
+        motion: bad_motion.into_inner(),
+    };
     let valid = depth.len() as u64 - s.depth;
     Prepared {
         color,

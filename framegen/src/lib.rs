@@ -46,6 +46,10 @@ pub enum FramegenError {
     /// for the device, or an error wgpu reported.
     #[error(transparent)]
     Gpu(#[from] gpu_device::GpuError),
+    /// A plan called an executor's passes out of order (a bug in a plan
+    /// of `pipeline`, never a property of the input).
+    #[error("executor passes out of order: {0}")]
+    PassOrder(&'static str),
     /// The device failed or was lost.
     #[error("GPU device error: {0}")]
     Device(String),

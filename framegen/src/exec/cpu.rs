@@ -96,9 +96,9 @@ impl Backend for CpuBackend {
 
 /// The frame being ingested.
 fn ingesting(ingest: &mut Option<Ingest>) -> Result<&mut Ingest, FramegenError> {
-    ingest
-        .as_mut()
-        .ok_or_else(|| FramegenError::Device("an ingest pass ran before upload()".into()))
+    ingest.as_mut().ok_or(FramegenError::PassOrder(
+        "an ingest pass ran before upload()",
+    ))
 }
 
 /// A frame's colour and depth, as interpolation's resolve reads them.
@@ -120,8 +120,9 @@ impl CpuBackend {
 
     /// The output a previous pass of the plan made.
     fn output(out: &mut Option<Output>) -> Result<&mut Output, FramegenError> {
-        out.as_mut()
-            .ok_or_else(|| FramegenError::Device("a pass ran before the output was made".into()))
+        out.as_mut().ok_or(FramegenError::PassOrder(
+            "a pass ran before the output was made",
+        ))
     }
 }
 
@@ -207,7 +208,7 @@ impl Executor for CpuBackend {
         let i = self
             .ingest
             .take()
-            .ok_or_else(|| FramegenError::Device("ingested() before upload()".into()))?;
+            .ok_or(FramegenError::PassOrder("ingested() before upload()"))?;
         let dynamic = i.state.history.dynamic;
         self.previous = i.prev.map(|(_, p)| p);
         self.current = Some(i.state);
@@ -302,9 +303,9 @@ impl Executor for CpuBackend {
     }
 
     fn resolve(&mut self, job: &Job) -> Result<(), FramegenError> {
-        let prev = self.previous.as_ref().ok_or_else(|| {
-            FramegenError::Device("interpolation without a previous frame".into())
-        })?;
+        let prev = self.previous.as_ref().ok_or(FramegenError::PassOrder(
+            "interpolation without a previous frame",
+        ))?;
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         let out = Self::output(&mut self.out)?;
         timed(&mut self.timings, Pass::Resolve, || {
@@ -316,6 +317,6 @@ impl Executor for CpuBackend {
     fn finish(&mut self) -> Result<Output, FramegenError> {
         self.out
             .take()
-            .ok_or_else(|| FramegenError::Device("no generated frame was made".into()))
+            .ok_or(FramegenError::PassOrder("no generated frame was made"))
     }
 }

@@ -334,7 +334,7 @@ impl GpuBackend {
         let cur = current.as_ref().ok_or(FramegenError::NoFrame)?;
         let g = generation
             .as_ref()
-            .ok_or_else(|| FramegenError::Device("a pass ran before begin()".into()))?;
+            .ok_or(FramegenError::PassOrder("a pass ran before begin()"))?;
         let inputs = PassInputs {
             ctx,
             kernels,
@@ -358,9 +358,9 @@ impl GpuBackend {
             rec,
             ..
         } = self;
-        let i = ingest
-            .as_ref()
-            .ok_or_else(|| FramegenError::Device("an ingest pass ran before upload()".into()))?;
+        let i = ingest.as_ref().ok_or(FramegenError::PassOrder(
+            "an ingest pass ran before upload()",
+        ))?;
         rec.pass(ctx, pass, |enc| f(kernels, i, enc))
     }
 }
@@ -527,7 +527,7 @@ impl Executor for GpuBackend {
         let i = self
             .ingest
             .take()
-            .ok_or_else(|| FramegenError::Device("ingested() before upload()".into()))?;
+            .ok_or(FramegenError::PassOrder("ingested() before upload()"))?;
         let count = if i.counted {
             self.ctx.read_pod::<u32>(&i.dynamic, 1)?[0]
         } else {
@@ -687,8 +687,8 @@ impl Executor for GpuBackend {
 
     fn resolve(&mut self, job: &Job) -> Result<(), FramegenError> {
         if !self.has_previous() {
-            return Err(FramegenError::Device(
-                "interpolation without a previous frame".into(),
+            return Err(FramegenError::PassOrder(
+                "interpolation without a previous frame",
             ));
         }
         let alpha = job.alpha;
@@ -707,7 +707,7 @@ impl Executor for GpuBackend {
         let g = self
             .generation
             .take()
-            .ok_or_else(|| FramegenError::Device("finish() before begin()".into()))?;
+            .ok_or(FramegenError::PassOrder("finish() before begin()"))?;
         let start = Instant::now();
         let n = g.tn as usize;
         let ctx = &self.ctx;
