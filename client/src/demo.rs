@@ -6,14 +6,14 @@
 use std::net::SocketAddr;
 use std::sync::Arc;
 
+use host::serve::Server;
+use host::session::Policy;
+use host::source::{Feed, Source, SourceSpec};
+use host::tls::Identity;
 use protocol::Codec;
 use protocol::FrameSize;
 use protocol::wire::{StreamBuffer, WindowMode};
-use server::render::WindowSettings;
-use server::serve::Server;
-use server::session::Policy;
-use server::source::{Feed, Source, SourceSpec};
-use server::tls::Identity;
+use scene::render::WindowSettings;
 
 use crate::{ConnectConfig, Pin, Session};
 

@@ -239,6 +239,9 @@ fn main() -> Result<(), gpu_device::OneLine> {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .init();
+    // Frame-sized buffers are freed and allocated again every frame: keep
+    // them in the heap instead of faulting fresh pages in each time.
+    framegen::memory::retain_freed_memory();
     Ok(command(Cli::parse())?)
 }
 
@@ -262,7 +265,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     } else {
         let mut scenes = args.scenes.clone();
         if args.all_scenes {
-            for name in server::scene::builtin::names() {
+            for name in scene::builtin::names() {
                 let spec = format!("builtin:{name}");
                 if !scenes.contains(&spec) {
                     scenes.push(spec);

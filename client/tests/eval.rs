@@ -37,9 +37,9 @@ fn methods_on_a_scene_and_on_its_dump() {
     let dir = tempfile::tempdir().unwrap();
     // The same frames as a dump (rendered at the display rate).
     let dump = dir.path().join("crossing-dump");
-    let scene = server::scene::Scene::load("builtin:crossing").unwrap();
+    let scene = scene::Scene::load("builtin:crossing").unwrap();
     let mut renderer =
-        server::render::Renderer::new(scene, SIZE, std::path::Path::new(".")).unwrap();
+        scene::render::Renderer::new(scene, SIZE, std::path::Path::new(".")).unwrap();
     let mut w = DumpWriter::create(&dump, Manifest::new(60.0, SIZE, "eval test")).unwrap();
     for i in 0..46 {
         w.write_frame(&renderer.render(i, 60.0).unwrap()).unwrap();

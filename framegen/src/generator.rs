@@ -184,6 +184,19 @@ impl FrameGenerator {
         self.backend.timings()
     }
 
+    /// Whether the following pushes and generations time each pass (see
+    /// [`Backend::set_profiling`]): per-pass times on wgpu cost a
+    /// submission and a wait per pass, so true totals are measured with it
+    /// off.
+    pub fn set_profiling(&mut self, on: bool) {
+        self.backend.set_profiling(on);
+    }
+
+    /// Whether [`FrameGenerator::timings`] holds per-pass times.
+    pub fn profiling(&self) -> bool {
+        self.backend.profiling()
+    }
+
     /// The history and background the last push left (parity tests,
     /// debugging).
     pub fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError> {

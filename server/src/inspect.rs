@@ -5,7 +5,7 @@
 //! with depth + camera (`protocol::import::reprojection`).
 
 use protocol::Frame;
-use protocol::import::{AnyDump, ImportError, ReprojectionCheck, ReprojectionReport};
+use protocol::import::{AnyDump, ReprojectionCheck, ReprojectionReport};
 
 /// Per-dump findings.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -105,16 +105,6 @@ pub fn inspect(reader: &AnyDump, mut progress: impl FnMut(u64)) -> Report {
     report
 }
 
-/// Opens and inspects `dir`, whatever its layout.
-pub fn inspect_dir(
-    dir: &std::path::Path,
-    progress: impl FnMut(u64),
-) -> Result<(AnyDump, Report), ImportError> {
-    let reader = AnyDump::open(dir)?;
-    let report = inspect(&reader, progress);
-    Ok((reader, report))
-}
-
 #[cfg(test)]
 mod tests {
     use std::time::Duration;
@@ -158,7 +148,7 @@ mod tests {
         w.finish().unwrap();
         std::fs::remove_file(frame_paths(dir.path(), 3).0).unwrap();
         let mut calls = 0;
-        let (_, r) = inspect_dir(dir.path(), |_| calls += 1).unwrap();
+        let r = inspect(&AnyDump::open(dir.path()).unwrap(), |_| calls += 1);
         assert_eq!(calls, 4);
         assert_eq!(r.frames, 4);
         assert_eq!(r.unreadable.len(), 1);

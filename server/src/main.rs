@@ -1,17 +1,19 @@
 //! `server`: the frame server's command line.
 
+mod inspect;
+
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use host::source::{Feed, Source, SourceSpec};
 use indicatif::{ProgressBar, ProgressStyle};
 use protocol::FrameSize;
 use protocol::dump::{DumpWriter, Manifest};
 use protocol::import::{AnyDump, Format};
 use protocol::wire::WindowMode;
-use server::render::{Renderer, WindowSettings, plan};
-use server::scene::{Scene, builtin};
-use server::source::{Feed, Source, SourceSpec};
+use scene::render::{Renderer, WindowSettings, plan};
+use scene::{Scene, builtin};
 
 #[derive(Parser)]
 #[command(
@@ -371,7 +373,7 @@ struct ServeArgs {
 }
 
 async fn serve(args: ServeArgs) -> anyhow::Result<()> {
-    let identity = server::tls::Identity::load_or_create(&args.identity)?;
+    let identity = host::tls::Identity::load_or_create(&args.identity)?;
     let token = args.token.unwrap_or_else(|| {
         use rand::Rng;
         let bytes: [u8; 16] = rand::rng().random();
@@ -385,7 +387,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         }
         _ => args.size,
     };
-    let policy = server::session::Policy {
+    let policy = host::session::Policy {
         token: token.clone(),
         server_name: "framegen-stream server".into(),
         size: args.size,
@@ -411,7 +413,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         (Feed::Live(frames), Some(source))
     };
     let server =
-        server::serve::Server::start(args.listen, identity.quic_server_config()?, policy, feed)?;
+        host::serve::Server::start(args.listen, identity.quic_server_config()?, policy, feed)?;
     println!("listening on {}", server.local_addr()?);
     println!("certificate SHA-256: {}", identity.fingerprint());
     println!("token: {token}");
@@ -422,7 +424,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     );
     tokio::signal::ctrl_c().await?;
     println!("shutting down");
-    let load = |f: fn(&server::source::SourceStats) -> &std::sync::atomic::AtomicU64| {
+    let load = |f: fn(&host::source::SourceStats) -> &std::sync::atomic::AtomicU64| {
         source.as_ref().map_or(0, |s| {
             f(&s.stats).load(std::sync::atomic::Ordering::Relaxed)
         })
@@ -502,7 +504,7 @@ fn inspect(dir: &Path) -> anyhow::Result<()> {
         foreign => print_source(foreign),
     }
     let bar = progress(reader.len(), "frames");
-    let report = server::inspect::inspect(&reader, |i| bar.set_position(i));
+    let report = inspect::inspect(&reader, |i| bar.set_position(i));
     bar.finish_and_clear();
     println!(
         "cuts: {}  sky pixels: {}  max motion: {:.2} px  mean frame interval: {:.4} s",

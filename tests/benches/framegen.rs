@@ -2,7 +2,7 @@
 //! method's total (push + one generated frame), on the CPU reference and on
 //! wgpu, at 540p, 720p and 1080p on the default scene.
 //!
-//! wgpu times are wall time of submit + wait per pass (the profiled
+//! wgpu per-pass times are wall time of submit + wait per pass (the profiled
 //! backend); lavapipe's timestamp queries report ~0 for real work. Each
 //! group has a `copy` entry in the same run: a copy of the bytes a frame's
 //! inputs take (color f32x4 + depth + motion, 28 B/px), a device buffer
@@ -16,7 +16,7 @@
 
 use std::time::Duration;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{Criterion, criterion_group};
 use framegen::{FrameGenerator, GpuBackend, GpuContext, Method, Pass, Settings};
 use protocol::{Frame, FrameSize};
 
@@ -67,13 +67,21 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
     let label = format!("{}x{}", size.width, size.height);
     for gpu in [false, true] {
         let backend = if gpu { "wgpu" } else { "cpu" };
-        let make = |method| {
+        // Per-pass times come from the profiled backend (a submit and a
+        // wait per pass); totals from the plain one (one submission per
+        // push and per generation), which is what the client runs.
+        let make = |method, profiled: bool| {
             let s = Settings {
                 cut_dynamic_fraction: 2.0,
                 ..Settings::for_method(method)
             };
             if gpu {
-                FrameGenerator::with_backend(s, Box::new(GpuBackend::profiled(ctx.clone())))
+                let backend = if profiled {
+                    GpuBackend::profiled(ctx.clone())
+                } else {
+                    GpuBackend::new(ctx.clone())
+                };
+                FrameGenerator::with_backend(s, Box::new(backend))
             } else {
                 FrameGenerator::cpu(s)
             }
@@ -111,7 +119,7 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
             next: 0,
         };
         for (method, passes) in per_pass {
-            let mut g = make(method);
+            let mut g = make(method, true);
             for _ in 0..3 {
                 run(&mut g, &mut feed);
             }
@@ -137,7 +145,7 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
             }
         }
         for method in Method::ALL {
-            let mut g = make(method);
+            let mut g = make(method, false);
             group.bench_function(format!("{method}/total"), |b| {
                 b.iter(|| run(&mut g, &mut feed))
             });
@@ -166,9 +174,9 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
         // submit + readback, as `server record` reports it): what a
         // generated frame must cost a fraction of. In both groups, so that
         // each group holds its own yardstick from the same run.
-        let scene = server::scene::Scene::load("builtin:default").expect("scene");
-        let mut renderer = server::render::Renderer::new(scene, size, std::path::Path::new("."))
-            .expect("renderer");
+        let scene = scene::Scene::load("builtin:default").expect("scene");
+        let mut renderer =
+            scene::render::Renderer::new(scene, size, std::path::Path::new(".")).expect("renderer");
         let mut index = 60;
         group.bench_function("render", |b| {
             b.iter(|| {
@@ -181,4 +189,10 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
 }
 
 criterion_group!(benches, bench);
-criterion_main!(benches);
+
+fn main() {
+    // As the client does at start-up (see `framegen::memory`).
+    framegen::memory::retain_freed_memory();
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

@@ -9,15 +9,15 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use client::{ConnectConfig, Pin};
+use host::serve::Server;
+use host::session::Policy;
+use host::source::{Feed, Source, StreamFrame};
+use host::tls::Identity;
 use protocol::assemble::encode_frame;
 use protocol::wire::{StreamBuffer, WindowMode};
 use protocol::{Codec, FrameSize};
-use server::render::Renderer;
-use server::scene::Scene;
-use server::serve::Server;
-use server::session::Policy;
-use server::source::{Feed, Source, StreamFrame};
-use server::tls::Identity;
+use scene::Scene;
+use scene::render::Renderer;
 
 const SIZE: FrameSize = FrameSize::new(1280, 720);
 

@@ -128,21 +128,21 @@ pub fn render_scene(
     fps: f64,
     indices: impl IntoIterator<Item = u64>,
 ) -> Vec<Frame> {
-    let scene = server::scene::Scene::load(&format!("builtin:{name}"))
+    let scene = scene::Scene::load(&format!("builtin:{name}"))
         .unwrap_or_else(|e| panic!("scene {name}: {e}"));
     render_with(scene, None, size, fps, indices)
 }
 
 /// Like [`render_scene`] for any scene, optionally with an adaptive window.
 pub fn render_with(
-    scene: server::scene::Scene,
-    window: Option<server::render::WindowSettings>,
+    scene: scene::Scene,
+    window: Option<scene::render::WindowSettings>,
     size: FrameSize,
     fps: f64,
     indices: impl IntoIterator<Item = u64>,
 ) -> Vec<Frame> {
     let name = scene.name.clone();
-    let mut renderer = server::render::Renderer::new(scene, size, std::path::Path::new("."))
+    let mut renderer = scene::render::Renderer::new(scene, size, std::path::Path::new("."))
         .unwrap_or_else(|e| panic!("renderer for {name}: {e}"));
     if let Some(w) = window {
         renderer.set_window(w);

@@ -10,7 +10,7 @@
 use framegen::{FrameGenerator, Method, PixelSource, Settings};
 use protocol::dump::{DumpReader, DumpWriter, Manifest};
 use protocol::{Frame, FrameSize};
-use server::scene::Scene;
+use scene::Scene;
 
 const SIZE: FrameSize = FrameSize::new(192, 108);
 
@@ -34,7 +34,7 @@ fn recorded(scene: Scene, start: u64, count: u64) -> Vec<Frame> {
 /// The crossing scene's moving objects seen by a camera that dollies
 /// sideways: object motion and camera motion together.
 fn crossing_with_camera() -> Scene {
-    let text = server::scene::builtin::source("crossing").unwrap().replace(
+    let text = scene::builtin::source("crossing").unwrap().replace(
         "path: Static(eye: (0, 1.8, 7), target: (0, 1.2, 0))",
         "path: Dolly(from: (-3, 1.8, 7), to: (3, 1.8, 7), duration_s: 3.0, look_dir: (0, -0.08, -1))",
     );
@@ -122,7 +122,7 @@ fn background_layers_reduce_the_hole_area() {
 #[test]
 fn adaptive_window_removes_border_holes() {
     use protocol::wire::WindowMode;
-    use server::render::WindowSettings;
+    use scene::render::WindowSettings;
     let scene = || Scene::load("builtin:pan").unwrap();
     let truth = tests::render_with(scene(), None, SIZE, 60.0, 61..62);
     let border_filled = |window: Option<WindowSettings>| {

@@ -7,14 +7,14 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use framegen::{FrameGenerator, Method, Settings};
+use host::serve::Server;
+use host::session::Policy;
+use host::source::{Feed, SourceSpec};
+use host::tls::Identity;
 use protocol::dump::DumpReader;
 use protocol::import::{AnyDump, Format, Hypothesis, import};
 use protocol::wire::{StreamBuffer, WindowMode};
 use protocol::{Codec, Frame};
-use server::serve::Server;
-use server::session::Policy;
-use server::source::{Feed, SourceSpec};
-use server::tls::Identity;
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/blender")

@@ -6,11 +6,11 @@
 use std::time::Duration;
 
 use glam::{DVec2, DVec3};
+use host::pacer::{Pace, Pacer};
 use protocol::assemble::encode_frame;
 use protocol::dump::{DumpReader, DumpWriter, Manifest};
 use protocol::wire::StreamBuffer;
 use protocol::{Codec, FrameSize, Limits, WorldPoint};
-use server::pacer::{Pace, Pacer};
 
 const SIZE: FrameSize = FrameSize::new(64, 36);
 const FPS: f64 = 30.0;

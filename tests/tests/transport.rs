@@ -8,13 +8,13 @@ use std::time::Duration;
 
 use client::{ConnectConfig, ConnectError, Pin};
 use glam::DVec3;
+use host::serve::Server;
+use host::session::Policy;
+use host::source::{Feed, Source, SourceSpec, StreamFrame};
+use host::tls::Identity;
 use protocol::dump::{DumpReader, DumpWriter, Manifest};
 use protocol::wire::{RejectReason, StreamBuffer, WindowMode};
 use protocol::{Codec, Frame, FrameSize};
-use server::serve::Server;
-use server::session::Policy;
-use server::source::{Feed, Source, SourceSpec, StreamFrame};
-use server::tls::Identity;
 use tokio::sync::broadcast;
 
 const SIZE: FrameSize = FrameSize::new(96, 54);
@@ -271,7 +271,7 @@ async fn a_client_that_never_reads_does_not_slow_a_healthy_one() {
         .frames_dropped
         .load(std::sync::atomic::Ordering::Relaxed);
     // All but the few streams its flow control and our in-flight limit admit.
-    let admitted = 2 + server::serve::MAX_IN_FLIGHT as u64 + 1;
+    let admitted = 2 + host::serve::MAX_IN_FLIGHT as u64 + 1;
     assert!(
         dropped >= FRAMES - admitted,
         "frames dropped for the stalled client: {dropped}"

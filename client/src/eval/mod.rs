@@ -323,7 +323,13 @@ fn run_group(
             // the newest fed one (interpolation: the interval before it).
             let behind = run.variant.settings.method.descriptor().held_back as usize * s;
             let mut outputs = Vec::new();
-            for ((_, g), t) in run.generators.iter_mut().zip(&mut run.timing) {
+            for ((b, g), t) in run.generators.iter_mut().zip(&mut run.timing) {
+                // wgpu alternates: plain intervals give the true totals (one
+                // submission per push and per generation), profiled ones in
+                // between the per-pass times (a submission and a wait per
+                // pass). The CPU reference times its passes for free.
+                let profiled = *b == BackendKind::Wgpu && (m / s) % 2 == 1;
+                g.set_profiling(profiled || *b == BackendKind::Cpu);
                 let start = Instant::now();
                 g.push(&fed)?;
                 let push = start.elapsed();
@@ -337,7 +343,13 @@ fn run_group(
                     generated.push(g.generate(j as f64 / s as f64)?);
                     gen_time.push(start.elapsed());
                 }
-                t.add(push, &gen_time, &g.timings());
+                let totals = *b == BackendKind::Cpu || !profiled;
+                let passes = if g.profiling() {
+                    g.timings()
+                } else {
+                    Vec::new()
+                };
+                t.add(push, &gen_time, &passes, totals);
                 outputs.push(generated);
             }
             if !scored {

@@ -14,8 +14,8 @@ use anyhow::Context;
 use protocol::dump::DumpReader;
 use protocol::wire::WindowMode;
 use protocol::{Frame, FrameSize};
-use server::render::{Renderer, WindowSettings};
-use server::scene::Scene;
+use scene::Scene;
+use scene::render::{Renderer, WindowSettings};
 
 /// What to evaluate on.
 #[derive(Clone, Debug, PartialEq)]

@@ -1,14 +1,15 @@
 //! What each variant costs: wall time of push (ingest) and of each
 //! generated frame, per pass, and the bandwidth floor to compare with.
 //!
-//! The wgpu backend runs profiled: one submission per pass, waited for.
-//! On a hardware adapter with timestamp queries each pass's time is the
-//! GPU time between timestamps around it ([`framegen::PassClock`]); on a
-//! software rasteriser such as lavapipe, whose timestamps read near zero
-//! for real work (DEVELOPERS.md), it is the submit + wait wall time. The
-//! report labels which. Totals (push, generate) are always wall time and
-//! include one synchronisation per pass. The CPU reference is
-//! wall time on all cores (rayon; `RAYON_NUM_THREADS` sets how many).
+//! The wgpu backend alternates between plain intervals, whose wall times
+//! are the totals (push, generate: one submission each, as the client runs
+//! it), and profiled intervals in between, which give the per-pass times:
+//! one submission per pass, waited for. On a hardware adapter with
+//! timestamp queries each pass's time is the GPU time between timestamps
+//! around it ([`framegen::PassClock`]); on a software rasteriser such as
+//! lavapipe, whose timestamps read near zero for real work (DEVELOPERS.md),
+//! it is the submit + wait wall time. The report labels which. The CPU
+//! reference is wall time on all cores (rayon; `RAYON_NUM_THREADS` sets how many).
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -25,10 +26,10 @@ pub fn method_of(backend: BackendKind, timestamps: bool) -> &'static str {
     match (backend, timestamps) {
         (BackendKind::Cpu, _) => "wall time, CPU reference on all cores (rayon)",
         (BackendKind::Wgpu, false) => {
-            "per pass: wall time of submit + wait (profiled; the adapter's timestamps are not used); totals: wall time"
+            "totals: wall time of the plain (unprofiled) intervals; per pass: wall time of submit + wait in the profiled intervals between them (the adapter's timestamps are not used)"
         }
         (BackendKind::Wgpu, true) => {
-            "per pass: GPU time from timestamp queries around each pass; totals: wall time of the profiled run"
+            "totals: wall time of the plain (unprofiled) intervals; per pass: GPU time from timestamp queries around each pass in the profiled intervals between them"
         }
     }
 }
@@ -58,20 +59,31 @@ impl TimingAcc {
         }
     }
 
-    /// One rendered frame: its push, its generated frames, and the passes
-    /// the backend reported for all of them.
-    pub fn add(&mut self, push: Duration, generated: &[Duration], passes: &[PassTime]) {
+    /// One rendered frame: its push and its generated frames (counted in
+    /// the totals when `totals`), and the passes the backend timed for them
+    /// (none when it ran unprofiled).
+    pub fn add(
+        &mut self,
+        push: Duration,
+        generated: &[Duration],
+        passes: &[PassTime],
+        totals: bool,
+    ) {
         let ms = |d: Duration| d.as_secs_f64() * 1e3;
-        self.push.push(ms(push));
-        self.generate.extend(generated.iter().map(|&d| ms(d)));
-        let total = ms(push) + generated.iter().map(|&d| ms(d)).sum::<f64>();
-        self.per_generated
-            .push(total / generated.len().max(1) as f64);
-        for p in passes {
-            self.timestamps |= p.gpu.is_some();
-            *self.passes.entry(p.pass.name()).or_default() += ms(p.gpu.unwrap_or(p.time));
+        if totals {
+            self.push.push(ms(push));
+            self.generate.extend(generated.iter().map(|&d| ms(d)));
+            let total = ms(push) + generated.iter().map(|&d| ms(d)).sum::<f64>();
+            self.per_generated
+                .push(total / generated.len().max(1) as f64);
         }
-        self.intervals += 1;
+        if !passes.is_empty() {
+            for p in passes {
+                self.timestamps |= p.gpu.is_some();
+                *self.passes.entry(p.pass.name()).or_default() += ms(p.gpu.unwrap_or(p.time));
+            }
+            self.intervals += 1;
+        }
     }
 
     /// The summary.
@@ -203,10 +215,35 @@ mod tests {
     fn per_generated_time_shares_the_push() {
         let mut t = TimingAcc::new(BackendKind::Cpu);
         let ms = Duration::from_millis;
-        t.add(ms(6), &[ms(2), ms(4)], &[]);
+        t.add(ms(6), &[ms(2), ms(4)], &[], true);
         let s = t.finish();
         assert_eq!(s.push_ms, 6.0);
         assert_eq!(s.per_generated_ms, 6.0);
         assert_eq!(s.generate_ms, 2.0);
+    }
+
+    /// Profiled intervals give the per-pass times and stay out of the
+    /// totals; plain ones give the totals and no pass times.
+    #[test]
+    fn profiled_intervals_time_passes_and_plain_ones_the_totals() {
+        let mut t = TimingAcc::new(BackendKind::Wgpu);
+        let ms = Duration::from_millis;
+        let warp = |d| PassTime {
+            pass: framegen::Pass::Warp,
+            time: ms(d),
+            gpu: None,
+        };
+        t.add(ms(10), &[ms(10)], &[], true);
+        t.add(ms(50), &[ms(50)], &[warp(30)], false);
+        t.add(ms(12), &[ms(12)], &[], true);
+        t.add(ms(60), &[ms(60)], &[warp(40)], false);
+        let s = t.finish();
+        // Totals: medians of 20 and 24 ms only (nearest rank).
+        assert!(
+            s.per_generated_ms == 20.0 || s.per_generated_ms == 24.0,
+            "{s:?}"
+        );
+        assert_eq!(s.passes.len(), 1);
+        assert_eq!(s.passes[0].ms, 35.0);
     }
 }

@@ -91,6 +91,10 @@ struct Scratch {
     mask: Option<wgpu::Buffer>,
     pyramid: Option<wgpu::Buffer>,
     dynamic: Option<wgpu::Buffer>,
+    /// Where a generated frame is copied for the CPU to read.
+    staging: Option<wgpu::Buffer>,
+    /// Where an ingest's dynamic-pixel count is copied for the CPU to read.
+    count: Option<wgpu::Buffer>,
 }
 
 fn ensure<'a>(
@@ -422,6 +426,14 @@ impl Backend for GpuBackend {
         }))
     }
 
+    fn set_profiling(&mut self, on: bool) {
+        self.rec.profile = on;
+    }
+
+    fn profiling(&self) -> bool {
+        self.rec.profile
+    }
+
     fn name(&self) -> String {
         format!(
             "wgpu {} ({:?})",
@@ -523,15 +535,28 @@ impl Executor for GpuBackend {
     }
 
     fn ingested(&mut self) -> Result<u32, FramegenError> {
-        self.rec.flush(&self.ctx)?;
         let i = self
             .ingest
             .take()
             .ok_or(FramegenError::PassOrder("ingested() before upload()"))?;
-        let count = if i.counted {
-            self.ctx.read_pod::<u32>(&i.dynamic, 1)?[0]
-        } else {
-            0
+        let ctx = &*self.ctx;
+        // The count's copy joins the ingest's submission.
+        let staging = i.counted.then(|| {
+            let s = self
+                .scratch
+                .count
+                .get_or_insert_with(|| ctx.staging("dynamic count", 4));
+            let encoder = self
+                .rec
+                .encoder
+                .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
+            encoder.copy_buffer_to_buffer(&i.dynamic, 0, s, 0, 4);
+            s.clone()
+        });
+        self.rec.flush(ctx)?;
+        let count = match staging {
+            Some(s) => ctx.map_read(&s, 4, |b| u32::from_ne_bytes([b[0], b[1], b[2], b[3]]))?,
+            None => 0,
         };
         self.spare = i.prev.map(|(_, b)| b);
         self.current = Some(i.buffers);
@@ -703,24 +728,52 @@ impl Executor for GpuBackend {
     }
 
     fn finish(&mut self) -> Result<Output, FramegenError> {
-        self.rec.flush(&self.ctx)?;
         let g = self
             .generation
             .take()
             .ok_or(FramegenError::PassOrder("finish() before begin()"))?;
-        let start = Instant::now();
         let n = g.tn as usize;
-        let ctx = &self.ctx;
-        let output = Output {
-            width: g.size.0,
-            height: g.size.1,
-            color: bytemuck::cast_slice::<f32, [f32; 4]>(&ctx.read_pod::<f32>(&g.color, n * 4)?)
-                .to_vec(),
-            depth: ctx.read_pod(&g.depth, n)?,
-            motion: bytemuck::cast_slice::<f32, [f32; 2]>(&ctx.read_pod::<f32>(&g.motion, n * 2)?)
-                .to_vec(),
-            mask: ctx.read_pod(&g.mask, n)?,
-        };
+        let parts = [
+            (&g.color, n * 16),
+            (&g.depth, n * 4),
+            (&g.motion, n * 8),
+            (&g.mask, n * 4),
+        ];
+        let total = parts.iter().map(|(_, len)| *len as u64).sum::<u64>();
+        let ctx = &*self.ctx;
+        let s = &mut self.scratch.staging;
+        if s.as_ref().is_none_or(|b| b.size() < total) {
+            *s = Some(ctx.staging("generated frame read-back", total));
+        }
+        let staging = s.as_ref().expect("just allocated");
+        // The copies join the generation's own submission (one submit and
+        // one wait per generated frame), into one persistent staging
+        // buffer; the mapped bytes are copied once, into the output's
+        // typed buffers.
+        let start = Instant::now();
+        let encoder = self
+            .rec
+            .encoder
+            .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
+        let mut offset = 0;
+        for (buffer, len) in parts {
+            encoder.copy_buffer_to_buffer(buffer, 0, staging, offset, len as u64);
+            offset += len as u64;
+        }
+        self.rec.flush(ctx)?;
+        let output = ctx.map_read(staging, total, |bytes| {
+            let (color, rest) = bytes.split_at(n * 16);
+            let (depth, rest) = rest.split_at(n * 4);
+            let (motion, mask) = rest.split_at(n * 8);
+            Output {
+                width: g.size.0,
+                height: g.size.1,
+                color: bytemuck::pod_collect_to_vec(color),
+                depth: bytemuck::pod_collect_to_vec(depth),
+                motion: bytemuck::pod_collect_to_vec(motion),
+                mask: bytemuck::pod_collect_to_vec(mask),
+            }
+        })?;
         if self.rec.profile {
             self.rec.timings.push(PassTime {
                 pass: Pass::Readback,

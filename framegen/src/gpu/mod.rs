@@ -107,21 +107,26 @@ impl GpuContext {
             })
     }
 
-    /// Copies `len` bytes of `buffer` back to the CPU (submits and waits).
-    pub fn read(&self, buffer: &wgpu::Buffer, len: u64) -> Result<Vec<u8>, FramegenError> {
-        if len == 0 {
-            return Ok(Vec::new());
-        }
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("read-back"),
-            size: len.next_multiple_of(4),
+    /// A buffer the GPU copies results into for the CPU to read
+    /// ([`GpuContext::map_read`]).
+    pub fn staging(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(16).next_multiple_of(wgpu::MAP_ALIGNMENT),
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
-        });
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, len.next_multiple_of(4));
-        self.queue.submit([encoder.finish()]);
-        let slice = staging.slice(..);
+        })
+    }
+
+    /// Maps the first `len` bytes of a staging buffer whose copies were
+    /// submitted, waits for them, and hands the bytes to `read`.
+    pub fn map_read<T>(
+        &self,
+        staging: &wgpu::Buffer,
+        len: u64,
+        read: impl FnOnce(&[u8]) -> T,
+    ) -> Result<T, FramegenError> {
+        let slice = staging.slice(..len.next_multiple_of(4));
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
@@ -130,14 +135,26 @@ impl GpuContext {
         rx.recv()
             .map_err(|e| FramegenError::Device(e.to_string()))?
             .map_err(|e| FramegenError::Device(e.to_string()))?;
-        let bytes = {
+        let out = {
             let view = slice
                 .get_mapped_range()
                 .map_err(|e| FramegenError::Device(format!("read-back: {e:?}")))?;
-            view[..len as usize].to_vec()
+            read(&view[..len as usize])
         };
         staging.unmap();
-        Ok(bytes)
+        Ok(out)
+    }
+
+    /// Copies `len` bytes of `buffer` back to the CPU (submits and waits).
+    pub fn read(&self, buffer: &wgpu::Buffer, len: u64) -> Result<Vec<u8>, FramegenError> {
+        if len == 0 {
+            return Ok(Vec::new());
+        }
+        let staging = self.staging("read-back", len);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, len.next_multiple_of(4));
+        self.queue.submit([encoder.finish()]);
+        self.map_read(&staging, len, <[u8]>::to_vec)
     }
 
     /// Reads back `count` plain-old-data elements.

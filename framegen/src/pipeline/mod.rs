@@ -230,6 +230,14 @@ pub trait Backend: Send {
     fn name(&self) -> String;
     /// The state the last ingest left (for parity tests and debugging).
     fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError>;
+    /// Whether the following pushes and generations time each pass, where
+    /// that costs something (the wgpu backend then submits and waits per
+    /// pass); a backend whose per-pass times are free ignores it.
+    fn set_profiling(&mut self, _on: bool) {}
+    /// Whether [`Backend::timings`] holds per-pass times.
+    fn profiling(&self) -> bool {
+        true
+    }
 }
 
 /// What ingesting a rendered frame produced.

@@ -48,19 +48,20 @@ pub fn key_depth(key: u32) -> f32 {
     f32::from_bits(!key)
 }
 
-/// The winners of a splat, in the GPU's storage form (0 = empty).
+/// The winners of a splat. Per slot, the GPU's two words packed into one:
+/// the winning key in the high half and `!index` of the winning candidate in
+/// the low half (0 = empty), so that one maximum picks both.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Winners {
-    /// Per slot: the winning key, 0 when empty.
-    pub keys: Vec<u32>,
-    /// Per slot: `!index` of the winning candidate, 0 when empty.
-    pub stored: Vec<u32>,
+    /// The first slot of the range resolved.
+    base: usize,
+    packed: Vec<u64>,
 }
 
 impl Winners {
     /// Index of the candidate that won `slot`, or `None`.
     pub fn winner(&self, slot: usize) -> Option<usize> {
-        match self.stored[slot] {
+        match self.stored(slot) {
             0 => None,
             s => Some(!s as usize),
         }
@@ -68,40 +69,74 @@ impl Winners {
 
     /// Depth of the winner of `slot`, or `None`.
     pub fn depth(&self, slot: usize) -> Option<f32> {
-        (self.keys[slot] != 0).then(|| key_depth(self.keys[slot]))
+        let key = self.key(slot);
+        (key != 0).then(|| key_depth(key))
+    }
+
+    /// The winning key of `slot` as the `splat_key` kernel leaves it (0 when
+    /// empty).
+    pub fn key(&self, slot: usize) -> u32 {
+        (self.get(slot) >> 32) as u32
+    }
+
+    /// `!index` of the winner of `slot` as the `splat_index` kernel leaves
+    /// it (0 when empty).
+    pub fn stored(&self, slot: usize) -> u32 {
+        self.get(slot) as u32
+    }
+
+    /// The packed word of `slot` (0 outside the range resolved).
+    fn get(&self, slot: usize) -> u64 {
+        slot.checked_sub(self.base)
+            .and_then(|i| self.packed.get(i))
+            .copied()
+            .unwrap_or(0)
     }
 }
 
 /// CPU reference of the two splat kernels.
 ///
-/// Runs on all cores with atomic maxima, as the kernels do: a maximum does
-/// not depend on the order it is taken in, so the winners are the same for
-/// any thread count.
+/// One atomic maximum per candidate over `key << 32 | !index`: the largest
+/// key wins, and among equal keys the largest `!index`, i.e. the smallest
+/// index, which is what the kernels' two rounds pick. A maximum does not
+/// depend on the order it is taken in, so the winners are the same for any
+/// thread count. A candidate that cannot beat the slot's current value
+/// (most of them, where surfaces overlap) skips the atomic read-modify-write.
 pub fn resolve(candidates: &[Candidate], slots: usize) -> Winners {
+    resolve_in(candidates, 0..slots)
+}
+
+/// [`resolve`] for the slots of `range` only (candidates landing elsewhere
+/// are ignored): what the kernels leave in those slots, for a pass whose
+/// candidates can only land there (a level of the background layers).
+pub fn resolve_in(candidates: &[Candidate], range: std::ops::Range<usize>) -> Winners {
     use rayon::prelude::*;
-    use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
-    let zeroed = || {
-        (0..slots)
-            .into_par_iter()
-            .map(|_| AtomicU32::new(0))
-            .collect::<Vec<_>>()
-    };
-    let keys = zeroed();
-    candidates.par_iter().for_each(|c| {
-        if let Some(k) = keys.get(c.slot as usize) {
-            k.fetch_max(c.key, Relaxed);
-        }
-    });
-    let keys: Vec<u32> = keys.into_par_iter().map(AtomicU32::into_inner).collect();
-    let stored = zeroed();
-    candidates.par_iter().enumerate().for_each(|(i, c)| {
-        let slot = c.slot as usize;
-        if slot < slots && keys[slot] == c.key {
-            stored[slot].fetch_max(!(i as u32), Relaxed);
-        }
-    });
-    let stored = stored.into_par_iter().map(AtomicU32::into_inner).collect();
-    Winners { keys, stored }
+    use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+    let packed: Vec<AtomicU64> = range
+        .clone()
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|_| AtomicU64::new(0))
+        .collect();
+    candidates
+        .par_iter()
+        .with_min_len(4096)
+        .enumerate()
+        .for_each(|(i, c)| {
+            let slot = (c.slot as usize).checked_sub(range.start);
+            if let Some(slot) = slot.and_then(|s| packed.get(s)) {
+                let v = (u64::from(c.key) << 32) | u64::from(!(i as u32));
+                if v > slot.load(Relaxed) {
+                    slot.fetch_max(v, Relaxed);
+                }
+            }
+        });
+    // In place (same layout), without a second frame-sized allocation.
+    let packed = packed.into_iter().map(AtomicU64::into_inner).collect();
+    Winners {
+        base: range.start,
+        packed,
+    }
 }
 
 /// Parameters of the splat kernels.

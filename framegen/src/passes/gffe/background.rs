@@ -151,8 +151,9 @@ pub fn collect(
             .par_iter()
             .map(|t| candidate(t, shift, camera, &bg, levels, l, tolerance))
             .collect();
-        let winners = splat::resolve(&cands, bg.len());
+        // Level l's candidates land in level l or l + 1.
         let (begin, end) = (levels.offset(l), levels.offset((l + 2).min(levels.count)));
+        let winners = splat::resolve_in(&cands, begin as usize..end as usize);
         bg[begin as usize..end as usize]
             .par_iter_mut()
             .zip(begin..end)

@@ -19,8 +19,8 @@ use protocol::{Frame, FrameSize};
 use tokio::sync::broadcast;
 
 use crate::pacer::{Pace, Pacer};
-use crate::render::{Renderer, WindowSettings};
-use crate::scene::Scene;
+use scene::Scene;
+use scene::render::{Renderer, WindowSettings};
 
 /// One frame, encoded as the bytes of its per-frame stream.
 #[derive(Debug)]

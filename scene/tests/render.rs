@@ -7,8 +7,8 @@ use std::path::Path;
 use glam::{DVec2, DVec3};
 use protocol::dump::{DumpReader, DumpWriter, Manifest};
 use protocol::{BufferKind, Frame, FrameSize, WorldPoint};
-use server::render::{Pass, Renderer, plan};
-use server::scene::{Scene, builtin};
+use scene::render::{Pass, Renderer, plan};
+use scene::{Scene, builtin};
 
 const SIZE: FrameSize = FrameSize::new(320, 180);
 
@@ -42,12 +42,12 @@ fn passes_follow_the_declared_effects() {
         let has = |p| r.passes().contains(&p);
         assert_eq!(
             has(Pass::Shadow),
-            scene.has(server::scene::Effect::Shadows),
+            scene.has(scene::Effect::Shadows),
             "{name}"
         );
         assert_eq!(
             has(Pass::Translucent),
-            scene.has(server::scene::Effect::Translucency),
+            scene.has(scene::Effect::Translucency),
             "{name}"
         );
         assert!(has(Pass::Opaque) && has(Pass::Background));
@@ -294,7 +294,7 @@ fn a_recorded_dump_reads_back_identically() {
 
 fn windowed(name: &str, mode: protocol::wire::WindowMode) -> Renderer {
     let mut r = renderer(name);
-    r.set_window(server::render::WindowSettings {
+    r.set_window(scene::render::WindowSettings {
         mode,
         ..Default::default()
     });
@@ -399,7 +399,7 @@ fn a_moving_light_moves_shadows_on_static_geometry() {
 fn opengl_renders_what_vulkan_renders() {
     let open = |backends| {
         let adapter = gpu_device::adapter_on(backends).expect("an adapter on this backend");
-        server::render::gpu::on_adapter(&adapter).expect("the renderer's formats")
+        scene::render::gpu::on_adapter(&adapter).expect("the renderer's formats")
     };
     for name in builtin::names() {
         let render = |backends| {

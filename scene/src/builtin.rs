@@ -1,33 +1,27 @@
-//! The scenes shipped in `server/scenes/`, embedded in the binary so
+//! The scenes shipped in `scene/scenes/`, embedded in the binary so
 //! `builtin:NAME` works from anywhere. Each file starts with a comment that
 //! says which challenge it stresses.
 
 /// `(name, RON source)` of every built-in scene.
 pub const SCENES: &[(&str, &str)] = &[
-    ("default", include_str!("../../scenes/default.ron")),
-    ("pan", include_str!("../../scenes/pan.ron")),
-    ("dolly", include_str!("../../scenes/dolly.ron")),
-    ("crossing", include_str!("../../scenes/crossing.ron")),
-    (
-        "moving_light",
-        include_str!("../../scenes/moving_light.ron"),
-    ),
-    ("sky", include_str!("../../scenes/sky.ron")),
-    ("thin", include_str!("../../scenes/thin.ron")),
-    (
-        "fast_rotation",
-        include_str!("../../scenes/fast_rotation.ron"),
-    ),
-    ("translucent", include_str!("../../scenes/translucent.ron")),
-    ("cut", include_str!("../../scenes/cut.ron")),
-    ("huge", include_str!("../../scenes/huge.ron")),
+    ("default", include_str!("../scenes/default.ron")),
+    ("pan", include_str!("../scenes/pan.ron")),
+    ("dolly", include_str!("../scenes/dolly.ron")),
+    ("crossing", include_str!("../scenes/crossing.ron")),
+    ("moving_light", include_str!("../scenes/moving_light.ron")),
+    ("sky", include_str!("../scenes/sky.ron")),
+    ("thin", include_str!("../scenes/thin.ron")),
+    ("fast_rotation", include_str!("../scenes/fast_rotation.ron")),
+    ("translucent", include_str!("../scenes/translucent.ron")),
+    ("cut", include_str!("../scenes/cut.ron")),
+    ("huge", include_str!("../scenes/huge.ron")),
 ];
 
 /// `(name, glTF JSON)` of the assets built-in scenes use, as
 /// `Gltf(path: "builtin:NAME")`. Buffers are embedded as data URIs.
 pub const ASSETS: &[(&str, &str)] = &[(
     "pyramid.gltf",
-    include_str!("../../scenes/assets/pyramid.gltf"),
+    include_str!("../scenes/assets/pyramid.gltf"),
 )];
 
 /// The bytes of a built-in asset.
@@ -51,7 +45,7 @@ pub fn names() -> impl Iterator<Item = &'static str> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Scene;
+    use crate::Scene;
 
     #[test]
     fn every_builtin_scene_parses_and_validates() {

@@ -5,7 +5,7 @@
 use super::targets::{
     COLOR_FORMAT, DEPTH_FORMAT, ID_FORMAT, LINEAR_DEPTH_FORMAT, MOTION_FORMAT, SHADOW_FORMAT,
 };
-use crate::scene::mesh::Vertex;
+use crate::mesh::Vertex;
 
 /// Bind group layouts shared by the passes.
 pub struct Layouts {

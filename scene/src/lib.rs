@@ -1,7 +1,12 @@
+//! Scenes and the renderer that draws them, with no networking: used by the
+//! streaming host (`host`), the `server` binary's `record`, and the client's
+//! `eval` and demo.
+//!
 //! Scene files (DESIGN §10): camera path, objects and their animation,
 //! materials, lights, and the **effects the scene needs**. Scenes are RON
-//! files in `server/scenes/`; the built-in ones are embedded in the binary
-//! ([`builtin`]).
+//! files in `scene/scenes/`; the built-in ones are embedded in the binary
+//! ([`builtin`]). [`render`] is the wgpu forward renderer (colour, linear
+//! depth, motion), building only the passes a scene's effects need.
 //!
 //! Animation is a pure function of time: [`Scene::evaluate`] gives the
 //! camera, every object transform and every light at any `t`, so frame `k` at
@@ -12,6 +17,7 @@ pub mod animation;
 pub mod builtin;
 pub mod camera_path;
 pub mod mesh;
+pub mod render;
 
 use std::collections::{BTreeMap, BTreeSet};
 

@@ -2,15 +2,15 @@
 //! depth, motion and ids) per built-in scene at 1280×720. On lavapipe GPU
 //! timestamps are unreliable, so this is wall time, as the DESIGN asks.
 //!
-//! `cargo bench -p server --bench render` (set `RENDER_BENCH_SIZE=WxH` to
+//! `cargo bench -p scene --bench render` (set `RENDER_BENCH_SIZE=WxH` to
 //! change the size).
 
 use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use protocol::FrameSize;
-use server::render::Renderer;
-use server::scene::{Scene, builtin};
+use scene::render::Renderer;
+use scene::{Scene, builtin};
 
 fn size() -> FrameSize {
     std::env::var("RENDER_BENCH_SIZE")

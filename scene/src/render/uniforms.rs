@@ -5,7 +5,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::{DMat3, DMat4, DVec3, DVec4, Mat4};
 
-use crate::scene::{LightKind, LightState, Material, Scene, Texture};
+use crate::{LightKind, LightState, Material, Scene, Texture};
 use protocol::Camera;
 
 /// Most lights a frame shades with.
@@ -103,7 +103,7 @@ pub struct FrameInputs<'a> {
 
 /// Builds the frame uniforms.
 pub fn frame_uniforms(scene: &Scene, f: &FrameInputs) -> FrameGpu {
-    use crate::scene::Effect;
+    use crate::Effect;
     let cam = f.camera;
     let camrel_to_world = world_from_camrel(cam);
     let clip_from_view = reverse_z() * cam.clip_from_view();
@@ -122,7 +122,7 @@ pub fn frame_uniforms(scene: &Scene, f: &FrameInputs) -> FrameGpu {
             LightKind::Point { .. } => (1.0, 0.0),
             LightKind::Spot { angle_deg, .. } => (2.0, angle_deg.to_radians().cos() as f32),
         };
-        let owns = shadow_owner && crate::scene::casts_shadow(&l.light);
+        let owns = shadow_owner && crate::casts_shadow(&l.light);
         if owns {
             shadow_owner = false;
         }

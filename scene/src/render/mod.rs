@@ -32,7 +32,7 @@ use wgpu::util::DeviceExt;
 pub use gpu::Gpu;
 pub use window::WindowSettings;
 
-use crate::scene::{Effect, Instance, Scene, SceneError, SceneState, mesh::Mesh};
+use crate::{Effect, Instance, Scene, SceneError, SceneState, mesh::Mesh};
 use protocol::frame::ExtraBuffer;
 use protocol::{BufferKind, Camera, Frame, FrameMeta, FrameSize, Pose, Projection};
 use targets::{SHADOW_FORMAT, Targets};
@@ -548,15 +548,11 @@ impl Renderer {
         })
     }
 
-    fn material_of(&self, instance: usize) -> &crate::scene::Material {
+    fn material_of(&self, instance: usize) -> &crate::Material {
         &self.scene.materials[&self.scene.objects[self.instances[instance].object].material]
     }
 
-    fn draw(
-        &self,
-        pass: &mut wgpu::RenderPass<'_>,
-        keep: impl Fn(&crate::scene::Material) -> bool,
-    ) {
+    fn draw(&self, pass: &mut wgpu::RenderPass<'_>, keep: impl Fn(&crate::Material) -> bool) {
         for i in 0..self.instances.len() {
             if keep(self.material_of(i)) {
                 self.draw_instance(pass, i);
@@ -578,7 +574,7 @@ impl Renderer {
         let light = state
             .lights
             .iter()
-            .find(|l| crate::scene::casts_shadow(&l.light))?;
+            .find(|l| crate::casts_shadow(&l.light))?;
         let spheres: Vec<(DVec3, f64)> = self
             .instances
             .iter()

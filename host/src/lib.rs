@@ -1,0 +1,15 @@
+//! The streaming host: what the `server` binary serves and the client's
+//! in-process demo embeds.
+//!
+//! * [`source`]: the paced frame producer, from a scene rendered with
+//!   `scene::render` or a dump replayed from disk;
+//! * [`pacer`]: sans-IO pacing of a frame sequence by simulation time, with
+//!   stale-frame skipping when the sender falls behind;
+//! * [`tls`], [`session`], [`serve`]: the QUIC streaming endpoint: identity
+//!   and pinning, the handshake, and per-client sessions.
+
+pub mod pacer;
+pub mod serve;
+pub mod session;
+pub mod source;
+pub mod tls;
