@@ -11,6 +11,7 @@
 
 #![allow(clippy::needless_range_loop)] // pixel loops index several buffers
 
+use framegen::gpu::{Pool, Rec};
 use framegen::passes::common::splat::{self, Candidate, GpuSplat};
 use framegen::passes::common::{crop, pushpull};
 use framegen::passes::gffe::warp;
@@ -141,8 +142,9 @@ fn splat_winners_are_exact() {
     let keys = ctx.storage("keys", slots as u64 * 4);
     let winners = ctx.storage("winners", slots as u64 * 4);
     let mut enc = ctx.device.create_command_encoder(&Default::default());
+    let pool = Pool::default();
     splat.encode(
-        &ctx,
+        &Rec::new(&ctx, &pool),
         &mut enc,
         &cbuf,
         cands.len() as u64,
@@ -180,7 +182,9 @@ fn warp_projection_matches() {
         let nbuf = ctx.storage_init("next", bytemuck::cast_slice(&next));
         let cbuf = ctx.storage("cands", next.len() as u64 * 8);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        gw.encode_project(&ctx, &mut enc, &target, &nbuf, next.len() as u32, &cbuf);
+        let pool = Pool::default();
+        let gpu = Rec::new(&ctx, &pool);
+        gw.encode_project(&gpu, &mut enc, &target, &nbuf, next.len() as u32, &cbuf);
         ctx.queue.submit([enc.finish()]);
         let gpu: Vec<Candidate> = ctx.read_pod(&cbuf, next.len()).unwrap();
         let slot_diff = cpu
@@ -239,7 +243,8 @@ fn push_pull_matches() {
             motion: &m,
             mask: &k,
         };
-        gh.encode(&ctx, &mut enc, o, &pyr, layout);
+        let pool = Pool::default();
+        gh.encode(&Rec::new(&ctx, &pool), &mut enc, o, &pyr, layout);
         ctx.queue.submit([enc.finish()]);
         let color: Vec<[f32; 4]> = ctx.read_pod(&c, n).unwrap();
         let depth: Vec<f32> = ctx.read_pod(&d, n).unwrap();
@@ -302,8 +307,9 @@ fn crop_matches() {
         let om = ctx.storage("om", n as u64 * 8);
         let ok = ctx.storage("ok", n as u64 * 4);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
+        let pool = Pool::default();
         gc.encode(
-            &ctx,
+            &Rec::new(&ctx, &pool),
             &mut enc,
             &c,
             &bufs[0],

@@ -173,7 +173,9 @@ fn reprojection_matches() {
         let uvb = ctx.storage("uv", n as u64 * 8);
         let cands = ctx.storage("cands", n as u64 * 8);
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        gr.encode_project(&ctx, &mut enc, (w, h), 0.5, &motion, &depth, &uvb, &cands);
+        let pool = framegen::gpu::Pool::default();
+        let gpu = framegen::gpu::Rec::new(&ctx, &pool);
+        gr.encode_project(&gpu, &mut enc, (w, h), 0.5, &motion, &depth, &uvb, &cands);
         ctx.queue.submit([enc.finish()]);
         let gpu: Vec<framegen::passes::common::splat::Candidate> = ctx.read_pod(&cands, n).unwrap();
         let gpu_uv: Vec<[f32; 2]> = ctx.read_pod(&uvb, n).unwrap();

@@ -9,8 +9,8 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use crate::FramegenError;
-use crate::gpu::GpuContext;
 use crate::gpu::timestamps::{PassClock, Timestamps};
+use crate::gpu::{GpuContext, Pool, Rec};
 use crate::input::Prepared;
 use crate::output::Output;
 use crate::passes::common::camera::PassCamera;
@@ -97,8 +97,12 @@ struct Scratch {
     count: Option<wgpu::Buffer>,
 }
 
+/// The scratch buffer in `slot`, replaced by a larger one when it is
+/// smaller than `bytes` (and then the pool's bind groups, which would keep
+/// the old one alive, are dropped).
 fn ensure<'a>(
     ctx: &GpuContext,
+    pool: &Pool,
     slot: &'a mut Option<wgpu::Buffer>,
     label: &str,
     bytes: u64,
@@ -106,6 +110,7 @@ fn ensure<'a>(
     let bytes = bytes.max(16);
     if slot.as_ref().is_none_or(|b| b.size() < bytes) {
         *slot = Some(ctx.storage(label, bytes));
+        pool.clear_groups();
     }
     slot.as_ref().expect("just allocated")
 }
@@ -120,6 +125,8 @@ struct Recorder {
     /// Passes recorded and not yet submitted.
     encoder: Option<wgpu::CommandEncoder>,
     timings: Vec<PassTime>,
+    /// Uniform slots and bind groups, reused from frame to frame.
+    pool: Pool,
 }
 
 impl Recorder {
@@ -127,7 +134,7 @@ impl Recorder {
         &mut self,
         ctx: &GpuContext,
         pass: Pass,
-        f: impl FnOnce(&mut wgpu::CommandEncoder),
+        f: impl FnOnce(&Rec<'_>, &mut wgpu::CommandEncoder),
     ) -> Result<(), FramegenError> {
         let start = Instant::now();
         let encoder = self
@@ -137,7 +144,7 @@ impl Recorder {
         if let Some(ts) = timestamps {
             ts.begin(encoder);
         }
-        f(encoder);
+        f(&Rec::new(ctx, &self.pool), encoder);
         if let Some(ts) = timestamps {
             ts.end(encoder);
         }
@@ -155,6 +162,7 @@ impl Recorder {
     fn flush(&mut self, ctx: &GpuContext) -> Result<(), FramegenError> {
         if let Some(encoder) = self.encoder.take() {
             ctx.queue.submit([encoder.finish()]);
+            self.pool.restart();
             ctx.wait()?;
         }
         Ok(())
@@ -249,7 +257,7 @@ impl Generation {
 
 /// What a generation pass records with.
 struct PassInputs<'a> {
-    ctx: &'a GpuContext,
+    ctx: &'a Rec<'a>,
     kernels: &'a Kernels,
     cur: &'a FrameBuffers,
     /// The frame before `cur` at its size (interpolation).
@@ -339,21 +347,23 @@ impl GpuBackend {
         let g = generation
             .as_ref()
             .ok_or(FramegenError::PassOrder("a pass ran before begin()"))?;
-        let inputs = PassInputs {
-            ctx,
-            kernels,
-            cur,
-            prev: spare.as_ref().filter(|p| p.n == cur.n),
-            g,
-        };
-        rec.pass(ctx, pass, |enc| f(&inputs, enc))
+        rec.pass(ctx, pass, |gpu, enc| {
+            let inputs = PassInputs {
+                ctx: gpu,
+                kernels,
+                cur,
+                prev: spare.as_ref().filter(|p| p.n == cur.n),
+                g,
+            };
+            f(&inputs, enc)
+        })
     }
 
     /// Records one ingest pass over the frame being ingested.
     fn record_ingest(
         &mut self,
         pass: Pass,
-        f: impl FnOnce(&Kernels, &Ingest, &mut wgpu::CommandEncoder),
+        f: impl FnOnce(&Rec<'_>, &Kernels, &Ingest, &mut wgpu::CommandEncoder),
     ) -> Result<(), FramegenError> {
         let Self {
             ctx,
@@ -365,7 +375,7 @@ impl GpuBackend {
         let i = ingest.as_ref().ok_or(FramegenError::PassOrder(
             "an ingest pass ran before upload()",
         ))?;
-        rec.pass(ctx, pass, |enc| f(kernels, i, enc))
+        rec.pass(ctx, pass, |gpu, enc| f(gpu, kernels, i, enc))
     }
 }
 
@@ -452,7 +462,11 @@ impl Executor for GpuBackend {
         let mut buffers = match self.spare.take() {
             Some(b) if b.n == n && b.k == plan.k && b.levels == plan.levels => b,
             // k = 0 (repeat) tracks nothing; the buffers keep a valid size.
-            _ => FrameBuffers::new(ctx, n, plan.k, plan.levels, plan.camera),
+            _ => {
+                // The groups of the buffers replaced would keep them alive.
+                self.rec.pool.clear_groups();
+                FrameBuffers::new(ctx, n, plan.k, plan.levels, plan.camera)
+            }
         };
         buffers.camera = plan.camera;
         let queue = &ctx.queue;
@@ -472,30 +486,29 @@ impl Executor for GpuBackend {
             Some(camera) => self.current.take().map(|b| (camera, b)),
             None => None,
         };
-        let s = &mut self.scratch;
+        let (s, pool) = (&mut self.scratch, &self.rec.pool);
         let slots = u64::from(plan.levels.total().max(n)) * 4;
         let sources = u64::from(prev.as_ref().map_or(0, |(_, p)| p.levels.len(0)).max(n)) * 8;
         self.ingest = Some(Ingest {
             buffers,
             prev,
             counted: plan.prev.is_some() && plan.k > 0,
-            keys: ensure(ctx, &mut s.keys, "keys", slots).clone(),
-            winners: ensure(ctx, &mut s.winners, "winners", slots).clone(),
-            candidates: ensure(ctx, &mut s.candidates, "candidates", sources).clone(),
-            dynamic: ensure(ctx, &mut s.dynamic, "dynamic count", 16).clone(),
+            keys: ensure(ctx, pool, &mut s.keys, "keys", slots).clone(),
+            winners: ensure(ctx, pool, &mut s.winners, "winners", slots).clone(),
+            candidates: ensure(ctx, pool, &mut s.candidates, "candidates", sources).clone(),
+            dynamic: ensure(ctx, pool, &mut s.dynamic, "dynamic count", 16).clone(),
         });
         Ok(())
     }
 
     fn history(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
         let plan = *plan;
-        let ctx = self.ctx.clone();
-        self.record_ingest(Pass::History, |k, i, enc| {
+        self.record_ingest(Pass::History, |ctx, k, i, enc| {
             enc.clear_buffer(&i.dynamic, 0, None);
             let prev = i.prev.as_ref().filter(|(_, p)| p.k == plan.k);
             let b = &i.buffers;
             k.history.encode(
-                &ctx,
+                ctx,
                 enc,
                 &plan.camera,
                 &b.depth,
@@ -512,11 +525,10 @@ impl Executor for GpuBackend {
 
     fn background(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
         let plan = *plan;
-        let ctx = self.ctx.clone();
-        self.record_ingest(Pass::Background, |k, i, enc| {
+        self.record_ingest(Pass::Background, |ctx, k, i, enc| {
             let b = &i.buffers;
             k.background.encode(
-                &ctx,
+                ctx,
                 enc,
                 &k.splat,
                 &plan.camera,
@@ -571,7 +583,7 @@ impl Executor for GpuBackend {
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         let (tw, th) = (job.target.width(), job.target.height());
         let tn = tw * th;
-        let s = &mut self.scratch;
+        let (s, pool) = (&mut self.scratch, &self.rec.pool);
         let slots = tn.max(job.bg_target.total());
         let layout = pushpull::layout(tw, th, job.pushpull);
         let pyramid_bytes = u64::from(layout.total()) * std::mem::size_of::<PpTexel>() as u64;
@@ -579,15 +591,22 @@ impl Executor for GpuBackend {
         self.generation = Some(Generation {
             tn,
             size: (tw, th),
-            color: ensure(ctx, &mut s.color, "out color", u64::from(tn) * 16).clone(),
-            depth: ensure(ctx, &mut s.depth, "out depth", u64::from(tn) * 4).clone(),
-            motion: ensure(ctx, &mut s.motion, "out motion", u64::from(tn) * 8).clone(),
-            mask: ensure(ctx, &mut s.mask, "out mask", u64::from(tn) * 4).clone(),
-            keys: ensure(ctx, &mut s.keys, "keys", u64::from(slots) * 4).clone(),
-            winners: ensure(ctx, &mut s.winners, "winners", u64::from(slots) * 4).clone(),
-            candidates: ensure(ctx, &mut s.candidates, "candidates", sources * 8).clone(),
-            next: ensure(ctx, &mut s.next, "next positions", u64::from(cur.n) * 16).clone(),
-            pyramid: ensure(ctx, &mut s.pyramid, "pyramid", pyramid_bytes).clone(),
+            color: ensure(ctx, pool, &mut s.color, "out color", u64::from(tn) * 16).clone(),
+            depth: ensure(ctx, pool, &mut s.depth, "out depth", u64::from(tn) * 4).clone(),
+            motion: ensure(ctx, pool, &mut s.motion, "out motion", u64::from(tn) * 8).clone(),
+            mask: ensure(ctx, pool, &mut s.mask, "out mask", u64::from(tn) * 4).clone(),
+            keys: ensure(ctx, pool, &mut s.keys, "keys", u64::from(slots) * 4).clone(),
+            winners: ensure(ctx, pool, &mut s.winners, "winners", u64::from(slots) * 4).clone(),
+            candidates: ensure(ctx, pool, &mut s.candidates, "candidates", sources * 8).clone(),
+            next: ensure(
+                ctx,
+                pool,
+                &mut s.next,
+                "next positions",
+                u64::from(cur.n) * 16,
+            )
+            .clone(),
+            pyramid: ensure(ctx, pool, &mut s.pyramid, "pyramid", pyramid_bytes).clone(),
             layout,
         });
         self.rec.encoder = None;

@@ -9,8 +9,6 @@
 
 use std::sync::Arc;
 
-use wgpu::util::DeviceExt;
-
 use crate::FramegenError;
 
 /// Threads per workgroup of every 1-D kernel (see `common.wgsl`).
@@ -19,7 +17,10 @@ pub const WORKGROUP: u32 = 256;
 /// Largest workgroup count along one dispatch dimension (WebGPU's default).
 const MAX_GROUPS_X: u32 = 32768;
 
+pub mod pool;
 pub mod timestamps;
+
+pub use pool::{Pool, Rec};
 
 /// The WGSL every pass shader is prefixed with (see `common.wgsl`).
 pub const COMMON_WGSL: &str = include_str!("common.wgsl");
@@ -95,16 +96,6 @@ impl GpuContext {
             self.queue.write_buffer(&buffer, 0, data);
         }
         buffer
-    }
-
-    /// A uniform buffer holding `data`.
-    pub fn uniform(&self, data: &[u8]) -> wgpu::Buffer {
-        self.device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("pass params"),
-                contents: data,
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
     }
 
     /// A buffer the GPU copies results into for the CPU to read
@@ -271,7 +262,7 @@ impl Kernel {
     /// order (skipped binding numbers take no buffer).
     pub fn dispatch(
         &self,
-        ctx: &GpuContext,
+        gpu: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         buffers: &[&wgpu::Buffer],
         items: u64,
@@ -286,19 +277,13 @@ impl Kernel {
             self.name,
             self.slots.len()
         );
-        let entries: Vec<_> = buffers
+        let entries: Vec<_> = self
+            .slots
             .iter()
-            .zip(&self.slots)
-            .map(|(b, &i)| wgpu::BindGroupEntry {
-                binding: i,
-                resource: b.as_entire_binding(),
-            })
+            .copied()
+            .zip(buffers.iter().copied())
             .collect();
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(self.name),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let group = gpu.bind_group(&self.layout, self.name, &entries);
         let groups = items.div_ceil(u64::from(WORKGROUP)) as u32;
         let x = groups.min(MAX_GROUPS_X);
         let y = groups.div_ceil(x);

@@ -11,7 +11,7 @@
 
 use glam::Vec2;
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{COPIED, Output};
 use crate::passes::common::camera::pixel_center;
 use crate::passes::common::sample::{bilinear, clamp_index};
@@ -95,7 +95,7 @@ impl GpuCrop {
     #[allow(clippy::too_many_arguments)]
     pub fn encode(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         c: &Crop,
         color: &wgpu::Buffer,

@@ -15,7 +15,7 @@
 
 use glam::{Vec2, Vec4};
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{EMPTY, FILLED, Output};
 use crate::passes::common::levels::Levels;
 
@@ -255,7 +255,7 @@ impl GpuHoles {
     /// [`layout`]); `pyramid` holds at least `layout.total()` texels.
     pub fn encode(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         out: crate::passes::gffe::warp::GpuOutput<'_>,
         pyramid: &wgpu::Buffer,

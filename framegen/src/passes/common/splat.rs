@@ -18,7 +18,7 @@
 //! thread schedule, and [`resolve`] (the CPU reference) reproduces it
 //! exactly from the same candidates.
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 
 /// "No slot" / "no winner".
 pub const NONE: u32 = u32::MAX;
@@ -177,7 +177,7 @@ impl GpuSplat {
     #[allow(clippy::too_many_arguments)]
     pub fn encode(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         candidates: &wgpu::Buffer,
         count: u64,

@@ -28,7 +28,7 @@
 
 use glam::Vec3;
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::{PassCamera, W_INVALID, cell, rebase};
 use crate::passes::common::levels::Levels;
 use crate::passes::common::splat::{self, Candidate, depth_key};
@@ -229,7 +229,7 @@ impl GpuBackground {
     #[allow(clippy::too_many_arguments)]
     pub fn encode(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         splat: &splat::GpuSplat,
         camera: &PassCamera,

@@ -11,7 +11,7 @@
 
 use glam::Vec2;
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{BACKGROUND, DisplayMap, EMPTY, Output};
 use crate::passes::common::camera::{PassCamera, cell, pixel_center};
 use crate::passes::common::levels::Levels;
@@ -142,7 +142,7 @@ impl GpuBgFill {
 
     /// The uniform both kernels read.
     pub fn params(
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         target: &PassCamera,
         current: &PassCamera,
         map: DisplayMap,
@@ -177,7 +177,7 @@ impl GpuBgFill {
     /// Records the projection of every texel into `candidates`.
     pub fn encode_project(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         params: &wgpu::Buffer,
         bg: &wgpu::Buffer,
@@ -192,7 +192,7 @@ impl GpuBgFill {
     #[allow(clippy::too_many_arguments)]
     pub fn encode_resolve(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         params: &wgpu::Buffer,
         bg: &wgpu::Buffer,

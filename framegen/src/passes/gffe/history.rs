@@ -35,7 +35,7 @@
 
 use glam::Vec2;
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::{
     PassCamera, W_DIRECTION, W_INVALID, cell, pixel_center, rebase,
 };
@@ -295,7 +295,7 @@ impl GpuHistory {
     #[allow(clippy::too_many_arguments)]
     pub fn encode(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         camera: &PassCamera,
         depth: &wgpu::Buffer,
@@ -319,9 +319,9 @@ impl GpuHistory {
             config: [k.max(1), u32::from(prev.is_some()), 0, 0],
             epsilon: [epsilon, tolerance, 0.0, 0.0],
         }));
-        // Unused previous buffers are bound to placeholders of this frame's
-        // own (read-only bindings cannot alias the written ones).
-        let placeholder = ctx.storage("no previous history", 16);
+        // Unused previous buffers are bound to the executor's placeholder
+        // (read-only bindings cannot alias the written ones).
+        let placeholder = ctx.placeholder();
         let (pp, pt) = match &prev {
             Some((_, b)) => (b.positions, b.track),
             None => (&placeholder, &placeholder),

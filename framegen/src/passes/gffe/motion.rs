@@ -12,7 +12,7 @@
 
 use glam::Vec3;
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::W_POINT;
 use crate::passes::gffe::history::{MAX_HISTORY, chain, is_dynamic};
 
@@ -85,7 +85,7 @@ impl GpuMotion {
     #[allow(clippy::too_many_arguments)]
     pub fn encode(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         positions: &wgpu::Buffer,
         track: &wgpu::Buffer,

@@ -18,7 +18,7 @@
 //! ([`WARPED`]) and writes only holes ([`CRACK`]), so it is
 //! order-independent.
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{CRACK, DisplayMap, EMPTY, Output, WARPED};
 use crate::passes::common::camera::{PassCamera, cell, pixel_center};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
@@ -185,7 +185,7 @@ impl GpuWarp {
     }
 
     fn params(
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         target: &PassCamera,
         n: u32,
         sw: u32,
@@ -201,7 +201,7 @@ impl GpuWarp {
     /// Records `warp_project`: `next` (n positions) → `candidates`.
     pub fn encode_project(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         target: &PassCamera,
         next: &wgpu::Buffer,
@@ -217,7 +217,7 @@ impl GpuWarp {
     #[allow(clippy::too_many_arguments)]
     pub fn encode_resolve(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         target: &PassCamera,
         color: &wgpu::Buffer,

@@ -3,7 +3,7 @@
 
 use glam::Vec2;
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{Output, WARPED};
 use crate::passes::common::camera::{cell, pixel_center};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
@@ -109,7 +109,7 @@ impl GpuReproject {
         }
     }
 
-    fn params(ctx: &GpuContext, width: u32, height: u32, alpha: f32) -> wgpu::Buffer {
+    fn params(ctx: &Rec<'_>, width: u32, height: u32, alpha: f32) -> wgpu::Buffer {
         ctx.uniform(bytemuck::bytes_of(&Params {
             size: [width, height, 0, 0],
             alpha: [alpha, 0.0, 0.0, 0.0],
@@ -120,7 +120,7 @@ impl GpuReproject {
     #[allow(clippy::too_many_arguments)]
     pub fn encode_project(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         (width, height): (u32, u32),
         alpha: f32,
@@ -140,7 +140,7 @@ impl GpuReproject {
     #[allow(clippy::too_many_arguments)]
     pub fn encode_merge(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         (width, height): (u32, u32),
         depth: &wgpu::Buffer,

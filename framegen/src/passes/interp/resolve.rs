@@ -7,7 +7,7 @@
 
 use glam::Vec2;
 
-use crate::gpu::{Binding, GpuContext, Kernel};
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{Output, WARPED};
 use crate::passes::common::camera::pixel_center;
 use crate::passes::common::sample::{bilinear, clamp_index};
@@ -84,7 +84,7 @@ impl GpuResolve {
     #[allow(clippy::too_many_arguments)]
     pub fn encode(
         &self,
-        ctx: &GpuContext,
+        ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         (width, height): (u32, u32),
         alpha: f32,
