@@ -72,10 +72,10 @@ impl Output {
         Self {
             width,
             height,
-            color: vec![[0.0; 4]; n],
-            depth: vec![0.0; n],
-            motion: vec![[0.0; 2]; n],
-            mask: vec![EMPTY; n],
+            color: crate::par::filled([0.0; 4], n),
+            depth: crate::par::filled(0.0, n),
+            motion: crate::par::filled([0.0; 2], n),
+            mask: crate::par::filled(EMPTY, n),
         }
     }
 

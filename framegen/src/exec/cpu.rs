@@ -48,8 +48,10 @@ pub struct CpuBackend {
     ingest: Option<Ingest>,
     /// The generated frame being made.
     out: Option<Output>,
-    /// GFFE's positions at α, between `motion` and `warp`.
-    next: Vec<[f32; 4]>,
+    /// GFFE's α, between `motion` and `warp`: eq. 1 is evaluated per
+    /// pixel inside the warp's projection, so no frame of positions at α
+    /// is stored.
+    motion: Option<f32>,
 }
 
 fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
@@ -242,21 +244,29 @@ impl Executor for CpuBackend {
     }
 
     fn motion(&mut self, job: &Job) -> Result<(), FramegenError> {
-        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
-        let h = &cur.history;
-        self.next = timed(&mut self.timings, Pass::Motion, || {
-            motion::estimate(&h.positions, &h.track, cur.k, job.alpha)
-        });
+        self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        self.motion = Some(job.alpha);
         Ok(())
     }
 
+    /// Fused with eq. 1: each source pixel's position at α is computed,
+    /// projected and splatted in one loop, without the frame-sized buffers
+    /// of positions and candidates between them (the same winners as
+    /// `motion::estimate`, `warp::project` and `splat::resolve` in turn;
+    /// its time includes the motion pass).
     fn warp(&mut self, job: &Job) -> Result<(), FramegenError> {
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
-        let next = &self.next;
+        let alpha = self
+            .motion
+            .take()
+            .ok_or(FramegenError::PassOrder("warp() before motion()"))?;
         let out = timed(&mut self.timings, Pass::Warp, || {
             let (w, h) = (job.target.width(), job.target.height());
-            let cands = warp::project(next, &job.target);
-            let winners = splat::resolve(&cands, (w * h) as usize);
+            let (positions, track) = (&cur.history.positions, &cur.history.track);
+            let winners = splat::resolve_with(track.len(), 0..(w * h) as usize, |x| {
+                let p = motion::estimate_at(positions, track, cur.k, x, alpha);
+                warp::candidate(p, &job.target)
+            });
             let mut out = Output::empty(w, h);
             let source_width = cur.camera.width();
             warp::resolve(&winners, &cur.frame.color, source_width, job.map, &mut out);
@@ -271,9 +281,11 @@ impl Executor for CpuBackend {
         let (cur, out, t) = self.parts()?;
         let out = Self::output(out)?;
         timed(t, Pass::BgFill, || {
-            let cands = bgfill::project(&cur.background, cur.levels, &job.target, job.bg_target);
-            let winners = splat::resolve(&cands, job.bg_target.total() as usize);
             let (bg, camera) = (&cur.background, &cur.camera);
+            let slots = 0..job.bg_target.total() as usize;
+            let winners = splat::resolve_with(bg.len(), slots, |i| {
+                bgfill::candidate(i, &bg[i], cur.levels, &job.target, job.bg_target)
+            });
             bgfill::resolve(&winners, bg, job.bg_target, camera, job.map, out);
         });
         Ok(())

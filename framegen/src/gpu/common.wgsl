@@ -9,11 +9,12 @@ struct Cam {
     col2: vec4<f32>,
     // Camera centre relative to the pass's reference origin (w unused).
     eye: vec4<f32>,
-    // tan(fov_y / 2) * aspect, tan(fov_y / 2), unused, unused.
+    // tan(fov_y / 2) * aspect, tan(fov_y / 2), pixel scales a_x, a_y.
     proj: vec4<f32>,
     // Window u0, v1, width, height (base NDC).
     window: vec4<f32>,
-    // Image width, height (pixels), unused, unused.
+    // Image width, height (pixels), pixel offsets b_x, b_y: a view-space
+    // point v at depth z lands at (v.x / z * a_x + b_x, v.y / z * a_y + b_y).
     size: vec4<f32>,
 };
 
@@ -73,10 +74,9 @@ fn project(cam: Cam, p: vec4<f32>) -> Proj {
     if !(z > 0.0) {
         return out;
     }
-    let ndc_x = v.x / (z * cam.proj.x);
-    let ndc_y = v.y / (z * cam.proj.y);
-    let px = (ndc_x - cam.window.x) / cam.window.z * cam.size.x;
-    let py = (cam.window.y - ndc_y) / cam.window.w * cam.size.y;
+    let inv = 1.0 / z;
+    let px = v.x * inv * cam.proj.z + cam.size.z;
+    let py = v.y * inv * cam.proj.w + cam.size.w;
     // Far off-screen values are rejected by the bounds tests of the callers;
     // keep them finite-comparable.
     out.pixel = vec2<f32>(px, py);

@@ -34,11 +34,17 @@ pub struct PassCamera {
     pub col2: [f32; 4],
     /// Camera centre relative to the reference origin.
     pub eye: [f32; 4],
-    /// `tan(fov_y/2)·aspect`, `tan(fov_y/2)`, 0, 0.
+    /// `tan(fov_y/2)·aspect`, `tan(fov_y/2)`, and the projection's pixel
+    /// scales `a_x = width / (proj_x · window_w)`, `a_y = −height / (proj_y ·
+    /// window_h)`: a view-space point `v` at depth `z` lands at pixel
+    /// `(v_x / z · a_x + b_x, v_y / z · a_y + b_y)`, one division per
+    /// projection.
     pub proj: [f32; 4],
     /// Window `u0`, `v1`, width, height in base NDC.
     pub window: [f32; 4],
-    /// Image width and height in pixels, 0, 0.
+    /// Image width and height in pixels, and the projection's pixel
+    /// offsets `b_x = −u0 · width / window_w`, `b_y = v1 · height /
+    /// window_h` (see `proj`).
     pub size: [f32; 4],
 }
 
@@ -63,22 +69,28 @@ impl PassCamera {
         let eye = (camera.pose.position - origin).as_vec3();
         let t = camera.projection.tan_half_fov();
         let w = &camera.window;
+        let (px, py) = (t * camera.projection.aspect, t);
+        let (sw, sh) = (f64::from(size.width), f64::from(size.height));
+        // The image-from-view map, folded in f64 once per camera.
+        let (ax, ay) = (sw / (px * w.width()), -sh / (py * w.height()));
+        let (bx, by) = (-w.u0 * sw / w.width(), w.v1 * sh / w.height());
         Self {
             col0: col(DVec3::X),
             col1: col(DVec3::Y),
             col2: col(DVec3::Z),
             eye: [eye.x, eye.y, eye.z, 0.0],
-            proj: [(t * camera.projection.aspect) as f32, t as f32, 0.0, 0.0],
+            proj: [px as f32, py as f32, ax as f32, ay as f32],
             window: [
                 w.u0 as f32,
                 w.v1 as f32,
                 w.width() as f32,
                 w.height() as f32,
             ],
-            size: [size.width as f32, size.height as f32, 0.0, 0.0],
+            size: [size.width as f32, size.height as f32, bx as f32, by as f32],
         }
     }
 
+    #[inline]
     fn c(&self, i: usize) -> Vec3 {
         let c = [self.col0, self.col1, self.col2][i];
         Vec3::new(c[0], c[1], c[2])
@@ -96,6 +108,7 @@ impl PassCamera {
 
     /// The position (or direction for `depth = +inf`) seen through the
     /// continuous pixel position `px` at linear depth `depth` (> 0).
+    #[inline]
     pub fn unproject(&self, px: Vec2, depth: f32) -> [f32; 4] {
         let ndc_x = self.window[0] + px.x / self.size[0] * self.window[2];
         let ndc_y = self.window[1] - px.y / self.size[1] * self.window[3];
@@ -111,6 +124,8 @@ impl PassCamera {
 
     /// Projects a position or direction; `None` behind the camera, for
     /// invalid input, or for non-finite / absurdly far image positions.
+    /// One division: the image map is folded into `proj` and `size`.
+    #[inline]
     pub fn project(&self, p: [f32; 4]) -> Option<Proj> {
         if p[3] < 0.0 {
             return None;
@@ -124,10 +139,9 @@ impl PassCamera {
         if z.is_nan() || z <= 0.0 {
             return None;
         }
-        let ndc_x = v.x / (z * self.proj[0]);
-        let ndc_y = v.y / (z * self.proj[1]);
-        let px = (ndc_x - self.window[0]) / self.window[2] * self.size[0];
-        let py = (self.window[1] - ndc_y) / self.window[3] * self.size[1];
+        let inv = 1.0 / z;
+        let px = v.x * inv * self.proj[2] + self.size[2];
+        let py = v.y * inv * self.proj[3] + self.size[3];
         let ok = px.abs() < 1e30 && py.abs() < 1e30;
         ok.then(|| Proj {
             pixel: Vec2::new(px, py),
@@ -137,6 +151,7 @@ impl PassCamera {
 
     /// Linear view depth of a stored position (`+inf` for directions, NaN
     /// for invalid slots, which every comparison then rejects).
+    #[inline]
     pub fn depth_of(&self, p: [f32; 4]) -> f32 {
         if p[3] < 0.0 {
             return f32::NAN;
@@ -150,6 +165,7 @@ impl PassCamera {
 }
 
 /// Centre of pixel `i` of a `width`-wide image.
+#[inline]
 pub fn pixel_center(i: usize, width: u32) -> Vec2 {
     let w = width as usize;
     Vec2::new((i % w) as f32 + 0.5, (i / w) as f32 + 0.5)
@@ -157,6 +173,7 @@ pub fn pixel_center(i: usize, width: u32) -> Vec2 {
 
 /// Linear index of the cell containing `px` in a `w`×`h` grid whose cells are
 /// `scale` pixels wide; `None` outside. WGSL `cell`.
+#[inline]
 pub fn cell(px: Vec2, w: u32, h: u32, scale: f32) -> Option<u32> {
     let q = px / scale;
     if !(q.x >= 0.0 && q.y >= 0.0 && q.x < w as f32 && q.y < h as f32) {
@@ -167,6 +184,7 @@ pub fn cell(px: Vec2, w: u32, h: u32, scale: f32) -> Option<u32> {
 
 /// Moves a stored position from one reference origin to another: `shift` is
 /// the old origin relative to the new one. Directions do not move.
+#[inline]
 pub fn rebase(p: [f32; 4], shift: Vec3) -> [f32; 4] {
     if p[3] > 0.5 {
         [p[0] + shift.x, p[1] + shift.y, p[2] + shift.z, p[3]]

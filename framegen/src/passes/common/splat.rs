@@ -110,6 +110,18 @@ pub fn resolve(candidates: &[Candidate], slots: usize) -> Winners {
 /// are ignored): what the kernels leave in those slots, for a pass whose
 /// candidates can only land there (a level of the background layers).
 pub fn resolve_in(candidates: &[Candidate], range: std::ops::Range<usize>) -> Winners {
+    resolve_with(candidates.len(), range, |i| candidates[i])
+}
+
+/// [`resolve_in`] over `count` candidates made on the fly by `candidate`
+/// (the CPU executor's fused passes: no frame-sized candidate buffer is
+/// written and read back). The same winners as resolving the collected
+/// candidates.
+pub fn resolve_with(
+    count: usize,
+    range: std::ops::Range<usize>,
+    candidate: impl Fn(usize) -> Candidate + Sync,
+) -> Winners {
     use rayon::prelude::*;
     use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
     let packed: Vec<AtomicU64> = range
@@ -118,19 +130,16 @@ pub fn resolve_in(candidates: &[Candidate], range: std::ops::Range<usize>) -> Wi
         .with_min_len(4096)
         .map(|_| AtomicU64::new(0))
         .collect();
-    candidates
-        .par_iter()
-        .with_min_len(4096)
-        .enumerate()
-        .for_each(|(i, c)| {
-            let slot = (c.slot as usize).checked_sub(range.start);
-            if let Some(slot) = slot.and_then(|s| packed.get(s)) {
-                let v = (u64::from(c.key) << 32) | u64::from(!(i as u32));
-                if v > slot.load(Relaxed) {
-                    slot.fetch_max(v, Relaxed);
-                }
+    (0..count).into_par_iter().with_min_len(4096).for_each(|i| {
+        let c = candidate(i);
+        let slot = (c.slot as usize).checked_sub(range.start);
+        if let Some(slot) = slot.and_then(|s| packed.get(s)) {
+            let v = (u64::from(c.key) << 32) | u64::from(!(i as u32));
+            if v > slot.load(Relaxed) {
+                slot.fetch_max(v, Relaxed);
             }
-        });
+        }
+    });
     // In place (same layout), without a second frame-sized allocation.
     let packed = packed.into_iter().map(AtomicU64::into_inner).collect();
     Winners {

@@ -68,7 +68,7 @@ pub struct PrevBackground<'a> {
 /// CPU reference of step 1: level 0 from the confirmed static fragments;
 /// the other levels empty.
 pub fn init(p0: &[[f32; 4]], track: &[u32], color: &[[f32; 4]], levels: Levels) -> Vec<Texel> {
-    let mut bg = vec![Texel::default(); levels.total() as usize];
+    let mut bg = crate::par::filled(Texel::default(), levels.total() as usize);
     if levels.count == 0 {
         return bg;
     }
@@ -147,13 +147,11 @@ pub fn collect(
     for l in 0..levels.count {
         let start = prev.levels.offset(l) as usize;
         let source = &prev.texels[start..start + prev.levels.len(l) as usize];
-        let cands: Vec<Candidate> = source
-            .par_iter()
-            .map(|t| candidate(t, shift, camera, &bg, levels, l, tolerance))
-            .collect();
         // Level l's candidates land in level l or l + 1.
         let (begin, end) = (levels.offset(l), levels.offset((l + 2).min(levels.count)));
-        let winners = splat::resolve_in(&cands, begin as usize..end as usize);
+        let winners = splat::resolve_with(source.len(), begin as usize..end as usize, |i| {
+            candidate(&source[i], shift, camera, &bg, levels, l, tolerance)
+        });
         bg[begin as usize..end as usize]
             .par_iter_mut()
             .zip(begin..end)

@@ -30,23 +30,34 @@ pub fn project(
     use rayon::prelude::*;
     bg.par_iter()
         .enumerate()
-        .map(|(i, t)| {
-            if !t.is_valid() {
-                return Candidate::MISS;
-            }
-            let l = source.level_of(i as u32);
-            let (w, h) = target.size(l);
-            camera
-                .project(t.pos)
-                .and_then(|r| {
-                    cell(r.pixel, w, h, Levels::scale(l)).map(|s| Candidate {
-                        slot: target.offset(l) + s,
-                        key: depth_key(r.depth),
-                    })
-                })
-                .unwrap_or(Candidate::MISS)
-        })
+        .map(|(i, t)| candidate(i, t, source, camera, target))
         .collect()
+}
+
+/// One element of [`project`]: where texel `i` of the background lands in
+/// its level of the target pyramid.
+#[inline]
+pub fn candidate(
+    i: usize,
+    t: &Texel,
+    source: Levels,
+    camera: &PassCamera,
+    target: Levels,
+) -> Candidate {
+    if !t.is_valid() {
+        return Candidate::MISS;
+    }
+    let l = source.level_of(i as u32);
+    let (w, h) = target.size(l);
+    camera
+        .project(t.pos)
+        .and_then(|r| {
+            cell(r.pixel, w, h, Levels::scale(l)).map(|s| Candidate {
+                slot: target.offset(l) + s,
+                key: depth_key(r.depth),
+            })
+        })
+        .unwrap_or(Candidate::MISS)
 }
 
 /// CPU reference of `bgfill_resolve`: fills the holes of `out`. `current`

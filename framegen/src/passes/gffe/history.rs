@@ -97,8 +97,7 @@ pub fn track(
     let k = (k as usize).clamp(1, MAX_HISTORY);
     let invalid = [0.0, 0.0, 0.0, W_INVALID];
     // Filled on all cores: at 720p with k = 2 this is 29 MB.
-    let mut positions = Vec::with_capacity(k * n);
-    positions.par_extend(rayon::iter::repeat_n(invalid, k * n));
+    let mut positions = crate::par::filled(invalid, k * n);
     let mut track_words = vec![0u32; n];
     // Bands of rows; each band gets its slice of every plane.
     let band = crate::par::band(camera.width() as usize, n);

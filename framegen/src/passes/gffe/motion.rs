@@ -38,18 +38,30 @@ pub fn estimate_pixel(planes: &[[f32; 4]], track: u32, alpha: f32) -> [f32; 4] {
 /// planes of `n` pixels.
 pub fn estimate(positions: &[[f32; 4]], track: &[u32], k: u32, alpha: f32) -> Vec<[f32; 4]> {
     use rayon::prelude::*;
+    (0..track.len())
+        .into_par_iter()
+        .map(|x| estimate_at(positions, track, k, x, alpha))
+        .collect()
+}
+
+/// Eq. 1 for pixel `x` of `k` planes of `track.len()` positions: one
+/// element of [`estimate`], for a pass that uses the position at α at once
+/// (the CPU executor's warp) instead of storing it.
+#[inline]
+pub fn estimate_at(
+    positions: &[[f32; 4]],
+    track: &[u32],
+    k: u32,
+    x: usize,
+    alpha: f32,
+) -> [f32; 4] {
     let n = track.len();
     let k = (k.max(1) as usize).min(MAX_HISTORY);
-    (0..n)
-        .into_par_iter()
-        .map(|x| {
-            let mut planes = [[0.0; 4]; MAX_HISTORY];
-            for (i, p) in planes.iter_mut().take(k).enumerate() {
-                *p = positions[i * n + x];
-            }
-            estimate_pixel(&planes[..k], track[x], alpha)
-        })
-        .collect()
+    let mut planes = [[0.0; 4]; MAX_HISTORY];
+    for (i, p) in planes.iter_mut().take(k).enumerate() {
+        *p = positions[i * n + x];
+    }
+    estimate_pixel(&planes[..k], track[x], alpha)
 }
 
 #[repr(C)]

@@ -27,19 +27,22 @@ use crate::passes::common::splat::{Candidate, Winners, depth_key};
 /// `next` and `target` are relative to the same origin.
 pub fn project(next: &[[f32; 4]], target: &PassCamera) -> Vec<Candidate> {
     use rayon::prelude::*;
-    next.par_iter()
-        .map(|&p| {
-            target
-                .project(p)
-                .and_then(|r| {
-                    cell(r.pixel, target.width(), target.height(), 1.0).map(|slot| Candidate {
-                        slot,
-                        key: depth_key(r.depth),
-                    })
-                })
-                .unwrap_or(Candidate::MISS)
+    next.par_iter().map(|&p| candidate(p, target)).collect()
+}
+
+/// One element of [`project`]: where the position `p` lands in `target`,
+/// and its depth key.
+#[inline]
+pub fn candidate(p: [f32; 4], target: &PassCamera) -> Candidate {
+    target
+        .project(p)
+        .and_then(|r| {
+            cell(r.pixel, target.width(), target.height(), 1.0).map(|slot| Candidate {
+                slot,
+                key: depth_key(r.depth),
+            })
         })
-        .collect()
+        .unwrap_or(Candidate::MISS)
 }
 
 /// CPU reference of `warp_resolve`: writes every won pixel of `out`.
