@@ -235,7 +235,7 @@ fn push_pull_matches() {
         let d = ctx.storage_init("d", bytemuck::cast_slice(&out.depth));
         let m = ctx.storage_init("m", bytemuck::cast_slice(&out.motion));
         let k = ctx.storage_init("k", bytemuck::cast_slice(&out.mask));
-        let pyr = ctx.storage("p", u64::from(layout.total()) * 32);
+        let pyr = ctx.storage("p", pushpull::GpuHoles::pyramid_bytes(layout));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         let o = warp::GpuOutput {
             color: &c,

@@ -16,7 +16,7 @@ use crate::output::Output;
 use crate::passes::common::camera::PassCamera;
 use crate::passes::common::crop::{Crop, GpuCrop};
 use crate::passes::common::levels::Levels;
-use crate::passes::common::pushpull::{self, GpuHoles, Texel as PpTexel};
+use crate::passes::common::pushpull::{self, GpuHoles};
 use crate::passes::common::splat::GpuSplat;
 use crate::passes::gffe::background::{GpuBackground, Texel as BgTexel};
 use crate::passes::gffe::bgfill::GpuBgFill;
@@ -586,7 +586,7 @@ impl Executor for GpuBackend {
         let (s, pool) = (&mut self.scratch, &self.rec.pool);
         let slots = tn.max(job.bg_target.total());
         let layout = pushpull::layout(tw, th, job.pushpull);
-        let pyramid_bytes = u64::from(layout.total()) * std::mem::size_of::<PpTexel>() as u64;
+        let pyramid_bytes = GpuHoles::pyramid_bytes(layout);
         let sources = u64::from(cur.n.max(cur.levels.total()));
         self.generation = Some(Generation {
             tn,

@@ -2,16 +2,24 @@
 //! pyramid of GeoMotionGen, seed 003): warp cracks, disocclusions the
 //! background never saw, and borders the adaptive window did not cover.
 //!
-//! * **init**: every written pixel enters level 0 with weight 1, holes with
-//!   weight 0. A texel carries color, *inverse* depth (so sky, `+inf`, is 0
-//!   and averages stay finite) and the motion vector.
+//! * **level 0** is the output itself: every written pixel counts with
+//!   weight 1, holes with weight 0. A texel carries color, *inverse* depth
+//!   (so sky, `+inf`, is 0 and averages stay finite) and the motion vector.
 //! * **pull**: level `k + 1` is the weight-normalised mean of its (up to)
-//!   four children, with weight `min(1, Σw)`.
-//! * **push**: from the coarsest level down, a texel of weight `w < 1`
-//!   becomes `w·own + (1 − w)·parent`, the parent sampled bilinearly with
-//!   each tap weighted by its own weight (empty texels do not count).
-//! * **resolve**: holes take level 0's value and are flagged
-//!   [`FILLED`]; if the whole frame was empty they become black sky.
+//!   four children, with weight `min(1, Σw)`; level 1 reads the output.
+//! * **push**: from the coarsest level down to level 1, a texel of weight
+//!   `w < 1` becomes `w·own + (1 − w)·parent`, the parent sampled
+//!   bilinearly with each tap weighted by its own weight (empty texels do
+//!   not count).
+//! * **resolve** is level 0's push: a hole (weight 0) takes its parent's
+//!   value outright and is flagged [`FILLED`]; with no parent weight (the
+//!   whole frame empty) it becomes black sky.
+//!
+//! Level 0 is never copied into the pyramid (that would be a frame-sized
+//! buffer written once and read twice): the pyramid stores levels 1 and up
+//! ([`stored`]), written pixels keep their values, and holes are resolved
+//! straight from level 1. This is exactly the full-pyramid scheme: with
+//! weight 0 a push yields the parent's value, with weight 1 the pixel stays.
 
 use glam::{Vec2, Vec4};
 
@@ -39,14 +47,16 @@ pub fn layout(width: u32, height: u32, levels: u32) -> Levels {
     )
 }
 
-/// CPU reference of `pp_init`.
-pub fn init(out: &Output, pyramid: &mut [Texel]) {
-    use rayon::prelude::*;
-    let n = out.mask.len();
-    pyramid[..n]
-        .par_iter_mut()
-        .enumerate()
-        .for_each(|(t, texel)| *texel = init_texel(out, t));
+/// The stored part of the pyramid of `layout`: where level 1 starts in the
+/// layout's indexing, and how many texels levels 1 and up hold (level 0 is
+/// the output itself).
+pub fn stored(layout: Levels) -> (u32, u32) {
+    let base = if layout.count > 1 {
+        layout.offset(1)
+    } else {
+        layout.total()
+    };
+    (base, layout.total() - base)
 }
 
 /// Level 0's texel of pixel `t`: the pixel with weight 1 where it was
@@ -64,16 +74,27 @@ fn init_texel(out: &Output, t: usize) -> Texel {
     }
 }
 
-/// CPU reference of `pp_pull` from level `k` to `k + 1`.
-pub fn pull(pyramid: &mut [Texel], levels: Levels, k: u32) {
+/// CPU reference of `pp_pull` from level `k` to `k + 1` (`k = 0`: from the
+/// output). `pyramid` holds the stored levels ([`stored`]).
+pub fn pull(out: &Output, pyramid: &mut [Texel], levels: Levels, k: u32) {
+    let (base, _) = stored(levels);
+    let d_o = (levels.offset(k + 1) - base) as usize;
+    let (below, above) = pyramid.split_at_mut(d_o);
+    let dst = &mut above[..levels.len(k + 1) as usize];
+    if k == 0 {
+        pull_level(dst, levels, k, |t| init_texel(out, t));
+    } else {
+        let src = &below[(levels.offset(k) - base) as usize..];
+        pull_level(dst, levels, k, |i| src[i]);
+    }
+}
+
+/// Level `k + 1` (`dst`) from level `k`, whose texel `i` is `child(i)`.
+fn pull_level(dst: &mut [Texel], levels: Levels, k: u32, child: impl Fn(usize) -> Texel + Sync) {
     use rayon::prelude::*;
     let (sw, sh) = levels.size(k);
-    let (dw, dh) = levels.size(k + 1);
-    let (so, d_o) = (levels.offset(k) as usize, levels.offset(k + 1) as usize);
-    let (below, above) = pyramid.split_at_mut(d_o);
-    let src = &below[so..];
-    above[..(dw * dh) as usize]
-        .par_chunks_mut(dw as usize)
+    let (dw, _) = levels.size(k + 1);
+    dst.par_chunks_mut(dw as usize)
         .enumerate()
         .for_each(|(y, row)| {
             let y = y as u32;
@@ -85,7 +106,7 @@ pub fn pull(pyramid: &mut [Texel], levels: Levels, k: u32) {
                     for dx in 0..2 {
                         let (cx, cy) = (2 * x + dx, 2 * y + dy);
                         if cx < sw && cy < sh {
-                            let c = src[(cy * sw + cx) as usize];
+                            let c = child((cy * sw + cx) as usize);
                             let w = c.a[3];
                             sum_w += w;
                             sa += Vec4::from_array(c.a) * w;
@@ -141,15 +162,16 @@ fn sample(level: &[Texel], (w, h): (u32, u32), p: Vec2) -> (Vec4, Vec4) {
     }
 }
 
-/// CPU reference of `pp_push` from level `k + 1` into level `k`.
+/// CPU reference of `pp_push` from level `k + 1` into level `k ≥ 1`.
 pub fn push(pyramid: &mut [Texel], levels: Levels, k: u32) {
     use rayon::prelude::*;
-    let (w, h) = levels.size(k);
-    let o = levels.offset(k) as usize;
-    let (below, above) = pyramid.split_at_mut(levels.offset(k + 1) as usize);
+    let (base, _) = stored(levels);
+    let (w, _) = levels.size(k);
+    let o = (levels.offset(k) - base) as usize;
+    let (below, above) = pyramid.split_at_mut((levels.offset(k + 1) - base) as usize);
     let coarse = &above[..levels.len(k + 1) as usize];
     let coarse_size = levels.size(k + 1);
-    below[o..o + (w * h) as usize]
+    below[o..o + levels.len(k) as usize]
         .par_chunks_mut(w as usize)
         .enumerate()
         .for_each(|(y, row)| {
@@ -159,8 +181,7 @@ pub fn push(pyramid: &mut [Texel], levels: Levels, k: u32) {
                 if wgt >= 1.0 {
                     continue;
                 }
-                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) * 0.5;
-                let (pa, pb) = sample(coarse, coarse_size, p);
+                let (pa, pb) = parent(coarse, coarse_size, x, y);
                 let oa = Vec4::from_array(own.a);
                 let ob = Vec4::from_array(own.b);
                 let a = oa * wgt + pa * (1.0 - wgt);
@@ -173,20 +194,33 @@ pub fn push(pyramid: &mut [Texel], levels: Levels, k: u32) {
         });
 }
 
-/// CPU reference of `pp_resolve`.
-pub fn resolve(pyramid: &[Texel], out: &mut Output) {
+/// The parent value of texel `(x, y)` of a level: the next coarser level
+/// (`coarse`, of `size`) sampled at the texel's centre.
+fn parent(coarse: &[Texel], size: (u32, u32), x: usize, y: usize) -> (Vec4, Vec4) {
+    let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) * 0.5;
+    sample(coarse, size, p)
+}
+
+/// CPU reference of `pp_resolve`, level 0's push: every hole of `out` takes
+/// its parent's value from level 1 (black sky without one).
+pub fn resolve(pyramid: &[Texel], levels: Levels, out: &mut Output) {
     use rayon::prelude::*;
+    let width = out.width as usize;
+    let level1 = (levels.count > 1).then(|| (&pyramid[..levels.len(1) as usize], levels.size(1)));
     out.par_pixels_mut().for_each(|(t, px)| {
         if *px.mask != EMPTY {
             return;
         }
-        let p = pyramid[t];
-        let (color, inv_depth, motion) = if p.a[3] > 0.0 {
-            (p.a, p.b[0], [p.b[1], p.b[2]])
-        } else {
-            ([0.0; 4], 0.0, [0.0; 2])
+        let (pa, pb) = match level1 {
+            Some((coarse, size)) => parent(coarse, size, t % width, t / width),
+            None => (Vec4::ZERO, Vec4::ZERO),
         };
-        *px.color = [color[0], color[1], color[2], 1.0];
+        let (color, inv_depth, motion) = if pa.w > 0.0 {
+            (pa, pb.x, [pb.y, pb.z])
+        } else {
+            (Vec4::ZERO, 0.0, [0.0; 2])
+        };
+        *px.color = [color.x, color.y, color.z, 1.0];
         *px.depth = if inv_depth > 0.0 {
             1.0 / inv_depth
         } else {
@@ -199,22 +233,16 @@ pub fn resolve(pyramid: &[Texel], out: &mut Output) {
 
 /// The whole CPU reference: fills every hole of `out`.
 pub fn fill(out: &mut Output, levels: u32) {
-    use rayon::prelude::*;
     let layout = layout(out.width, out.height, levels);
-    // Level 0 built in parallel (what `init` writes), the coarser levels
-    // after it (every texel of them is written by `pull`).
-    let mut pyramid: Vec<Texel> = (0..out.mask.len())
-        .into_par_iter()
-        .map(|t| init_texel(out, t))
-        .collect();
-    pyramid.resize(layout.total() as usize, Texel::default());
+    // Every stored texel is written by `pull` before anything reads it.
+    let mut pyramid = crate::par::filled(Texel::default(), stored(layout).1 as usize);
     for k in 0..layout.count - 1 {
-        pull(&mut pyramid, layout, k);
+        pull(out, &mut pyramid, layout, k);
     }
-    for k in (0..layout.count - 1).rev() {
+    for k in (1..layout.count - 1).rev() {
         push(&mut pyramid, layout, k);
     }
-    resolve(&pyramid, out);
+    resolve(&pyramid, layout, out);
 }
 
 #[repr(C)]
@@ -229,7 +257,6 @@ struct Params {
 /// The GPU pass.
 #[derive(Debug)]
 pub struct GpuHoles {
-    init: Kernel,
     pull: Kernel,
     push: Kernel,
     resolve: Kernel,
@@ -244,15 +271,20 @@ impl GpuHoles {
             Uniform, ReadWrite, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
         ];
         Self {
-            init: Kernel::new(ctx, src, "pp_init", b),
             pull: Kernel::new(ctx, src, "pp_pull", b),
             push: Kernel::new(ctx, src, "pp_push", b),
             resolve: Kernel::new(ctx, src, "pp_resolve", b),
         }
     }
 
+    /// Bytes of the pyramid buffer for `layout`: its stored levels
+    /// ([`stored`]), at least one texel (wgpu binds no empty buffer).
+    pub fn pyramid_bytes(layout: Levels) -> u64 {
+        u64::from(stored(layout).1.max(1)) * std::mem::size_of::<Texel>() as u64
+    }
+
     /// Records the whole push-pull over `out` with `layout` (see
-    /// [`layout`]); `pyramid` holds at least `layout.total()` texels.
+    /// [`layout`]); `pyramid` holds at least [`GpuHoles::pyramid_bytes`].
     pub fn encode(
         &self,
         ctx: &Rec<'_>,
@@ -261,9 +293,19 @@ impl GpuHoles {
         pyramid: &wgpu::Buffer,
         layout: Levels,
     ) {
+        let (base, _) = stored(layout);
+        // Offset in the pyramid buffer, width, height, and 1 for level 0
+        // (the output itself); a missing level is all zeros.
         let level = |k: u32| {
-            let (w, h) = layout.size(k);
-            [layout.offset(k), w, h, 0]
+            if k == 0 {
+                let (w, h) = layout.size(0);
+                [0, w, h, 1]
+            } else if k < layout.count {
+                let (w, h) = layout.size(k);
+                [layout.offset(k) - base, w, h, 0]
+            } else {
+                [0; 4]
+            }
         };
         let run = |kernel: &Kernel, encoder: &mut wgpu::CommandEncoder, dst: u32, src: u32| {
             let params = ctx.uniform(bytemuck::bytes_of(&Params {
@@ -277,13 +319,12 @@ impl GpuHoles {
                 u64::from(layout.len(dst)),
             );
         };
-        run(&self.init, encoder, 0, 0);
         for k in 0..layout.count - 1 {
             run(&self.pull, encoder, k + 1, k);
         }
-        for k in (0..layout.count - 1).rev() {
+        for k in (1..layout.count - 1).rev() {
             run(&self.push, encoder, k, k + 1);
         }
-        run(&self.resolve, encoder, 0, 0);
+        run(&self.resolve, encoder, 0, 1);
     }
 }

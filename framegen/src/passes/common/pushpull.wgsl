@@ -17,20 +17,24 @@ struct PpParams {
 @group(0) @binding(4) var<storage, read_write> out_mask: array<u32>;
 @group(0) @binding(5) var<storage, read_write> pyramid: array<PpTexel>;
 
-@compute @workgroup_size(256)
-fn pp_init(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let t = thread_index(wid, nwg, lid);
-    if t >= pp.dst.y * pp.dst.z {
-        return;
-    }
+// Texel `t` of level 0, which is the output itself: weight 1 where written,
+// 0 in a hole.
+fn level0(t: u32) -> PpTexel {
     if out_mask[t] == EMPTY_MASK {
-        pyramid[t] = PpTexel(vec4<f32>(0.0), vec4<f32>(0.0));
-    } else {
-        let c = out_color[t];
-        let m = out_motion[t];
-        let d = out_depth[t];
-        pyramid[t] = PpTexel(vec4<f32>(c.xyz, 1.0), vec4<f32>(select(1.0 / d, 0.0, is_inf(d)), m, 0.0));
+        return PpTexel(vec4<f32>(0.0), vec4<f32>(0.0));
     }
+    let c = out_color[t];
+    let m = out_motion[t];
+    let d = out_depth[t];
+    return PpTexel(vec4<f32>(c.xyz, 1.0), vec4<f32>(select(1.0 / d, 0.0, is_inf(d)), m, 0.0));
+}
+
+// Texel `i` of the level `pp.src` describes (`src.w == 1`: level 0).
+fn child(i: u32) -> PpTexel {
+    if pp.src.w == 1u {
+        return level0(i);
+    }
+    return pyramid[pp.src.x + i];
 }
 
 @compute @workgroup_size(256)
@@ -50,7 +54,7 @@ fn pp_pull(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
             let cx = 2u * x + dx;
             let cy = 2u * y + dy;
             if cx < pp.src.y && cy < pp.src.z {
-                let c = pyramid[pp.src.x + cy * pp.src.y + cx];
+                let c = child(cy * pp.src.y + cx);
                 let w = c.a.w;
                 sum_w += w;
                 sa += c.a * w;
@@ -84,11 +88,25 @@ fn pp_push(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     if wgt >= 1.0 {
         return;
     }
+    let par = parent(i, w);
+    let a = own.a * wgt + par.a * (1.0 - wgt);
+    let b = own.b * wgt + par.b * (1.0 - wgt);
+    pyramid[pp.dst.x + i] = PpTexel(vec4<f32>(a.xyz, wgt + (1.0 - wgt) * par.a.w), b);
+}
+
+struct Parent {
+    a: vec4<f32>,
+    b: vec4<f32>,
+};
+
+// The parent value of texel `i` of a `w`-wide level: the coarser level
+// `pp.src` sampled at the texel's centre, each tap weighted by its own
+// weight (see pushpull.rs).
+fn parent(i: u32, w: u32) -> Parent {
     let p = vec2<f32>(f32(i % w) + 0.5, f32(i / w) + 0.5) * 0.5;
     let q = p - 0.5;
     let base = floor(q);
     let f = q - base;
-    // Weighted bilinear: each tap counts with its own weight (see pushpull.rs).
     var taps = array<PpTexel, 4>(
         at(base.x, base.y),
         at(base.x + 1.0, base.y),
@@ -105,15 +123,11 @@ fn pp_push(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         sa += taps[j].a * wt;
         sb += taps[j].b * wt;
     }
-    var pa = vec4<f32>(0.0);
-    var pb = vec4<f32>(0.0);
+    var res = Parent(vec4<f32>(0.0), vec4<f32>(0.0));
     if sw > 0.0 {
-        pa = vec4<f32>((sa / sw).xyz, sw);
-        pb = sb / sw;
+        res = Parent(vec4<f32>((sa / sw).xyz, sw), sb / sw);
     }
-    let a = own.a * wgt + pa * (1.0 - wgt);
-    let b = own.b * wgt + pb * (1.0 - wgt);
-    pyramid[pp.dst.x + i] = PpTexel(vec4<f32>(a.xyz, wgt + (1.0 - wgt) * pa.w), b);
+    return res;
 }
 
 @compute @workgroup_size(256)
@@ -122,14 +136,19 @@ fn pp_resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
     if t >= pp.dst.y * pp.dst.z || out_mask[t] != EMPTY_MASK {
         return;
     }
-    let p = pyramid[t];
+    // Level 0's push: a hole (weight 0) takes its parent outright; without
+    // a level 1 (`src.y == 0`) it stays empty and becomes black sky.
+    var par = Parent(vec4<f32>(0.0), vec4<f32>(0.0));
+    if pp.src.y > 0u {
+        par = parent(t, pp.dst.y);
+    }
     var color = vec3<f32>(0.0);
     var inv_depth = 0.0;
     var motion = vec2<f32>(0.0);
-    if p.a.w > 0.0 {
-        color = p.a.xyz;
-        inv_depth = p.b.x;
-        motion = p.b.yz;
+    if par.a.w > 0.0 {
+        color = par.a.xyz;
+        inv_depth = par.b.x;
+        motion = par.b.yz;
     }
     out_color[t] = vec4<f32>(color, 1.0);
     if inv_depth > 0.0 {
