@@ -283,7 +283,15 @@ impl Executor for CpuBackend {
         timed(t, Pass::BgFill, || {
             let (bg, camera) = (&cur.background, &cur.camera);
             let slots = 0..job.bg_target.total() as usize;
+            // Level 0's fragments seeded by this frame's own static pixels
+            // land where the warp already wrote (`background::seeds`): they
+            // cannot fill a hole, so they are not projected.
+            let (track, positions) = (&cur.history.track, &cur.history.positions);
+            let seeded = |i: usize| i < track.len() && background::seeds(track[i], positions[i]);
             let winners = splat::resolve_with(bg.len(), slots, |i| {
+                if seeded(i) {
+                    return splat::Candidate::MISS;
+                }
                 bgfill::candidate(i, &bg[i], cur.levels, &job.target, job.bg_target)
             });
             bgfill::resolve(&winners, bg, job.bg_target, camera, job.map, out);

@@ -77,7 +77,7 @@ pub fn init(p0: &[[f32; 4]], track: &[u32], color: &[[f32; 4]], levels: Levels) 
         .par_iter_mut()
         .enumerate()
         .for_each(|(x, slot)| {
-            if !is_dynamic(track[x]) && is_confirmed(track[x]) && p0[x][3] != W_INVALID {
+            if seeds(track[x], p0[x]) {
                 let c = color[x];
                 *slot = Texel {
                     pos: p0[x],
@@ -86,6 +86,18 @@ pub fn init(p0: &[[f32; 4]], track: &[u32], color: &[[f32; 4]], levels: Levels) 
             }
         });
     bg
+}
+
+/// Whether a pixel of the rendered frame (its track word and `P_0`) enters
+/// level 0 of its own slot (step 1): confirmed static, with a position.
+///
+/// Such a fragment is exactly the pixel the forward warp moves: eq. 1 keeps
+/// a static pixel at `P_0`, so both project to the same target pixel, which
+/// the warp has therefore written. Background projection fills only holes,
+/// and a level-0 slot is one pixel, so these fragments never fill anything
+/// there, and the CPU executor skips them.
+pub fn seeds(track: u32, p0: [f32; 4]) -> bool {
+    !is_dynamic(track) && is_confirmed(track) && p0[3] != W_INVALID
 }
 
 /// The candidate of previous fragment `t` of level `l` (cases 1 and 2).
