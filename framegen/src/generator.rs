@@ -425,14 +425,24 @@ fn displayed_region(meta: &FrameMeta, display_size: Option<(u32, u32)>) -> ((u32
 fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
     use rayon::prelude::*;
     let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
-    let color = out
-        .color
-        .par_iter()
-        .map(|c| {
-            let ch = |v: f32| f16::from_f32(finite(v).clamp(0.0, crate::input::MAX_RADIANCE));
-            [ch(c[0]), ch(c[1]), ch(c[2]), f16::ONE]
-        })
-        .collect();
+    // In blocks: sanitised on the stack, then converted with the CPU's f16
+    // instructions in one call (`half`'s slice conversion, rounding to
+    // nearest like `f16::from_f32`).
+    let block = crate::input::CONVERT_BLOCK;
+    let mut color = crate::par::filled([f16::ZERO; 4], out.color.len());
+    color
+        .par_chunks_mut(block)
+        .zip(out.color.par_chunks(block))
+        .for_each(|(dst, src)| {
+            use half::slice::HalfFloatSliceExt;
+            let mut clean = [[0.0f32; 4]; crate::input::CONVERT_BLOCK];
+            for (c, s) in clean.iter_mut().zip(src) {
+                let ch = |v: f32| finite(v).clamp(0.0, crate::input::MAX_RADIANCE);
+                *c = [ch(s[0]), ch(s[1]), ch(s[2]), 1.0];
+            }
+            dst.as_flattened_mut()
+                .convert_from_f32_slice(clean[..src.len()].as_flattened());
+        });
     let depth = out
         .depth
         .par_iter()

@@ -68,14 +68,29 @@ pub struct Output {
 impl Output {
     /// An all-empty frame.
     pub fn empty(width: u32, height: u32) -> Self {
+        Self::from_fn(width, height, |_| Pixel::EMPTY)
+    }
+
+    /// A frame whose pixel `t` is `pixel(t)`, made on all cores with every
+    /// buffer written once (a pass that writes every pixel builds its
+    /// output this way instead of clearing one and writing it again).
+    pub fn from_fn(width: u32, height: u32, pixel: impl Fn(usize) -> Pixel + Sync + Send) -> Self {
+        use rayon::prelude::*;
         let n = width as usize * height as usize;
+        let (color, (depth, (motion, mask))) = (0..n)
+            .into_par_iter()
+            .map(|t| {
+                let p = pixel(t);
+                (p.color, (p.depth, (p.motion, p.mask)))
+            })
+            .unzip();
         Self {
             width,
             height,
-            color: crate::par::filled([0.0; 4], n),
-            depth: crate::par::filled(0.0, n),
-            motion: crate::par::filled([0.0; 2], n),
-            mask: crate::par::filled(EMPTY, n),
+            color,
+            depth,
+            motion,
+            mask,
         }
     }
 
@@ -106,6 +121,29 @@ impl Output {
             })
             .enumerate()
     }
+}
+
+/// One pixel of an [`Output`], by value ([`Output::from_fn`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pixel {
+    /// Linear RGB, alpha.
+    pub color: [f32; 4],
+    /// Linear view depth.
+    pub depth: f32,
+    /// Motion to the rendered frame, displayed pixels.
+    pub motion: [f32; 2],
+    /// Where it came from.
+    pub mask: u32,
+}
+
+impl Pixel {
+    /// A hole: nothing written.
+    pub const EMPTY: Pixel = Pixel {
+        color: [0.0; 4],
+        depth: 0.0,
+        motion: [0.0; 2],
+        mask: EMPTY,
+    };
 }
 
 /// One pixel of an [`Output`], writable ([`Output::par_pixels_mut`]).

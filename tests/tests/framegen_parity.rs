@@ -292,7 +292,7 @@ fn crop_matches() {
             extent,
             output,
         };
-        let cpu = crop::crop(&p.color, &p.depth, &p.motion, &c);
+        let cpu = crop::crop(&p.color, &p.depth, &p.motion, &c, false);
         let n = cpu.mask.len();
         let bufs: Vec<_> = [
             bytemuck::cast_slice::<_, u8>(&p.color).to_vec(),

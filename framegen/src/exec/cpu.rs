@@ -233,12 +233,9 @@ impl Executor for CpuBackend {
     fn crop(&mut self, c: &crop::Crop, still: bool) -> Result<(), FramegenError> {
         let (cur, out, t) = self.parts()?;
         let f = &cur.frame;
-        let mut o = timed(t, Pass::Crop, || {
-            crop::crop(&f.color, &f.depth, &f.motion, c)
+        let o = timed(t, Pass::Crop, || {
+            crop::crop(&f.color, &f.depth, &f.motion, c, still)
         });
-        if still {
-            o.motion.iter_mut().for_each(|m| *m = [0.0; 2]);
-        }
         *out = Some(o);
         Ok(())
     }
@@ -267,9 +264,9 @@ impl Executor for CpuBackend {
                 let p = motion::estimate_at(positions, track, cur.k, x, alpha);
                 warp::candidate(p, &job.target)
             });
-            let mut out = Output::empty(w, h);
             let source_width = cur.camera.width();
-            warp::resolve(&winners, &cur.frame.color, source_width, job.map, &mut out);
+            let color = &cur.frame.color;
+            let mut out = warp::resolve(&winners, color, source_width, job.map, (w, h));
             warp::close_cracks(&mut out);
             out
         });

@@ -12,7 +12,7 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{COPIED, Output};
+use crate::output::{COPIED, Output, Pixel};
 use crate::passes::common::camera::pixel_center;
 use crate::passes::common::sample::{bilinear, clamp_index};
 
@@ -36,28 +36,67 @@ impl Crop {
         self.origin + pixel_center(t, self.output.0) * (self.extent / out)
     }
 
+    /// Whether the displayed region is the whole rendered image at its own
+    /// size: every output pixel is the rendered pixel under it.
+    pub fn is_identity(&self) -> bool {
+        let (w, h) = self.source;
+        self.output == self.source
+            && self.origin == Vec2::ZERO
+            && self.extent == Vec2::new(w as f32, h as f32)
+    }
+
     /// Displayed pixels per rendered pixel.
     pub fn scale(&self) -> Vec2 {
         Vec2::new(self.output.0 as f32, self.output.1 as f32) / self.extent
     }
 }
 
-/// CPU reference of `crop`.
-pub fn crop(color: &[[f32; 4]], depth: &[f32], motion: &[[f32; 2]], c: &Crop) -> Output {
+/// CPU reference of `crop`; `still` gives every pixel zero motion (the
+/// GPU executor clears the motion buffer after the kernel).
+pub fn crop(
+    color: &[[f32; 4]],
+    depth: &[f32],
+    motion: &[[f32; 2]],
+    c: &Crop,
+    still: bool,
+) -> Output {
     let (w, h) = c.source;
-    let mut out = Output::empty(c.output.0, c.output.1);
+    if c.is_identity() {
+        // Pixel centres map to pixel centres: the bilinear weights are
+        // (1, 0) and the scale 1, so this is the gather below, exactly.
+        return Output::from_fn(w, h, |t| {
+            let rgb = color[t];
+            Pixel {
+                color: [rgb[0], rgb[1], rgb[2], 1.0],
+                depth: depth[t],
+                motion: if still { [0.0; 2] } else { motion[t] },
+                mask: COPIED,
+            }
+        });
+    }
+    gather(color, depth, motion, c, still)
+}
+
+/// The general crop: bilinear colour, nearest depth and motion.
+fn gather(color: &[[f32; 4]], depth: &[f32], motion: &[[f32; 2]], c: &Crop, still: bool) -> Output {
+    let (w, h) = c.source;
     let scale = c.scale();
-    use rayon::prelude::*;
-    out.par_pixels_mut().for_each(|(t, px)| {
+    Output::from_fn(c.output.0, c.output.1, |t| {
         let s = c.source_of(t);
         let rgb = bilinear(color, w, h, s);
         let nearest = clamp_index(s, w, h);
-        *px.color = [rgb.x, rgb.y, rgb.z, 1.0];
-        *px.depth = depth[nearest];
-        *px.motion = (Vec2::from_array(motion[nearest]) * scale).to_array();
-        *px.mask = COPIED;
-    });
-    out
+        let motion = if still {
+            [0.0; 2]
+        } else {
+            (Vec2::from_array(motion[nearest]) * scale).to_array()
+        };
+        Pixel {
+            color: [rgb.x, rgb.y, rgb.z, 1.0],
+            depth: depth[nearest],
+            motion,
+            mask: COPIED,
+        }
+    })
 }
 
 #[repr(C)]
@@ -115,5 +154,42 @@ impl GpuCrop {
             ],
             u64::from(c.output.0) * u64::from(c.output.1),
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_identity_crop_is_the_gather_exactly() {
+        let (w, h) = (37u32, 23u32);
+        let n = (w * h) as usize;
+        // Finite, non-negative colour (what input sanitising leaves), with
+        // values far apart so any blend with a neighbour would show.
+        let color: Vec<[f32; 4]> = (0..n)
+            .map(|i| {
+                let v = (i * 7919 % 1013) as f32 * 0.37;
+                [v, v * 3.1 + 1.0, 65504.0 - v, 1.0]
+            })
+            .collect();
+        let depth: Vec<f32> = (0..n).map(|i| 1.0 + i as f32 * 0.01).collect();
+        let motion: Vec<[f32; 2]> = (0..n).map(|i| [i as f32 * 0.3 - 40.0, -2.5]).collect();
+        let c = Crop {
+            source: (w, h),
+            origin: Vec2::ZERO,
+            extent: Vec2::new(w as f32, h as f32),
+            output: (w, h),
+        };
+        assert!(c.is_identity());
+        for still in [false, true] {
+            let fast = crop(&color, &depth, &motion, &c, still);
+            assert_eq!(fast, gather(&color, &depth, &motion, &c, still));
+        }
+        let shifted = Crop {
+            origin: Vec2::new(1.0, 0.0),
+            ..c
+        };
+        assert!(!shifted.is_identity());
     }
 }

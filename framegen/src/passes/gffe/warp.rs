@@ -19,7 +19,7 @@
 //! order-independent.
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{CRACK, DisplayMap, EMPTY, Output, WARPED};
+use crate::output::{CRACK, DisplayMap, EMPTY, Output, Pixel, WARPED};
 use crate::passes::common::camera::{PassCamera, cell, pixel_center};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 
@@ -45,28 +45,29 @@ pub fn candidate(p: [f32; 4], target: &PassCamera) -> Candidate {
         .unwrap_or(Candidate::MISS)
 }
 
-/// CPU reference of `warp_resolve`: writes every won pixel of `out`.
+/// CPU reference of `warp_resolve`: the `width × height` output with every
+/// won pixel written, the rest holes.
 pub fn resolve(
     winners: &Winners,
     color: &[[f32; 4]],
     source_width: u32,
     map: DisplayMap,
-    out: &mut Output,
-) {
-    use rayon::prelude::*;
-    let width = out.width;
-    out.par_pixels_mut().for_each(|(t, px)| {
+    (width, height): (u32, u32),
+) -> Output {
+    Output::from_fn(width, height, |t| {
         let Some(i) = winners.winner(t) else {
-            return;
+            return Pixel::EMPTY;
         };
         let center = pixel_center(t, width);
         let source = map.apply(pixel_center(i, source_width));
         let c = color[i];
-        *px.color = [c[0], c[1], c[2], 1.0];
-        *px.depth = winners.depth(t).unwrap_or(f32::INFINITY);
-        *px.motion = (source - center).to_array();
-        *px.mask = WARPED;
-    });
+        Pixel {
+            color: [c[0], c[1], c[2], 1.0],
+            depth: winners.depth(t).unwrap_or(f32::INFINITY),
+            motion: (source - center).to_array(),
+            mask: WARPED,
+        }
+    })
 }
 
 /// Largest ratio between the depths of a crack's two neighbours.
