@@ -1,7 +1,9 @@
 //! The CPU reference runs on all cores (rayon) and must give the same bits
 //! for any thread count: every method, on hard-case frames, with one thread
 //! and with several, compared bit for bit (colour, depth, motion, mask,
-//! history snapshot, push outcomes).
+//! history snapshot, push outcomes). And the passes that write into the
+//! buffers of a frame no longer needed (history, background) leave nothing
+//! of what those buffers held.
 
 use framegen::{FrameGenerator, Method, Settings};
 use protocol::{Frame, FrameSize};
@@ -71,4 +73,87 @@ fn cpu_output_is_the_same_for_any_thread_count() {
             }
         }
     }
+}
+
+/// History and background collection into recycled buffers full of garbage
+/// give the same bits as into fresh ones.
+#[test]
+fn recycled_buffers_leave_no_trace() {
+    use framegen::passes::common::camera::PassCamera;
+    use framegen::passes::common::levels::Levels;
+    use framegen::passes::gffe::background::{self, PrevBackground, Seeds, Texel};
+    use framegen::passes::gffe::history::{self, History, PrevHistory, Tracker};
+    let bits = |v: &[[f32; 4]]| -> Vec<u32> { v.iter().flatten().map(|x| x.to_bits()).collect() };
+    let all = tests::render_scene("crossing", SIZE, 60.0, 30..34);
+    let frames = framegen::decimate::decimate(&all, 2);
+    let (a, b) = (&frames[0], &frames[1]);
+    let (pa, mut pb) = (framegen::input::prepare(a), framegen::input::prepare(b));
+    // Some pixels without a surface: they write "no position" entries.
+    pb.depth.iter_mut().step_by(97).for_each(|d| *d = 0.0);
+    let n = pb.depth.len();
+    let (k, eps, tol) = (3, 0.5, 0.02);
+    let levels = Levels::new(3, SIZE.width, SIZE.height);
+    // Frame a at its own origin, then b continuing it.
+    let cam_a = PassCamera::new(&a.meta.camera, a.meta.size, a.meta.camera.pose.position);
+    let hist_a = history::track(&cam_a, &pa.depth, &pa.motion, None, k, eps, tol);
+    let seeds_a = Seeds {
+        p0: &hist_a.positions[..n],
+        track: &hist_a.track,
+        color: &pa.color,
+    };
+    let bg_a = background::collect(Vec::new(), &cam_a, seeds_a, levels, None, tol);
+    let origin = b.meta.camera.pose.position;
+    let cam_b = PassCamera::new(&b.meta.camera, b.meta.size, origin);
+    let prev_cam = PassCamera::new(&a.meta.camera, a.meta.size, origin);
+    let prev = PrevHistory {
+        camera: prev_cam,
+        positions: &hist_a.positions,
+        track: &hist_a.track,
+    };
+    let tracker = Tracker {
+        camera: &cam_b,
+        depth: &pb.depth,
+        motion: &pb.motion,
+        prev: Some(&prev),
+        k,
+        epsilon: eps,
+        tolerance: tol,
+    };
+    let fresh = tracker.track_into(History::empty());
+    let garbage = History {
+        positions: vec![[f32::NAN, 1e30, -7.0, 1.0]; k as usize * n],
+        track: vec![0xdead_beef; n],
+        dynamic: 12345,
+    };
+    let recycled = tracker.track_into(garbage);
+    assert!(
+        fresh.dynamic > 0,
+        "the frames move, so some pixels are dynamic"
+    );
+    assert_eq!(bits(&fresh.positions), bits(&recycled.positions));
+    assert_eq!(fresh.track, recycled.track);
+    assert_eq!(fresh.dynamic, recycled.dynamic);
+
+    let seeds_b = Seeds {
+        p0: &fresh.positions[..n],
+        track: &fresh.track,
+        color: &pb.color,
+    };
+    let prev_bg = PrevBackground {
+        camera: prev_cam,
+        levels,
+        texels: &bg_a,
+    };
+    let junk = Texel {
+        pos: [3.0, f32::NAN, 1.0, 1.0],
+        color: [9.0, 9.0, 9.0, 1.0],
+    };
+    let collect = |reuse| background::collect(reuse, &cam_b, seeds_b, levels, Some(prev_bg), tol);
+    let clean = collect(Vec::new());
+    let dirty = collect(vec![junk; levels.total() as usize]);
+    assert!(clean.iter().any(Texel::is_valid));
+    assert_eq!(
+        bytemuck::cast_slice::<_, u32>(&clean),
+        bytemuck::cast_slice::<_, u32>(&dirty)
+    );
 }

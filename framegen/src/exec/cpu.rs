@@ -35,6 +35,9 @@ struct Ingest {
     state: FrameState,
     /// The previous frame with its camera, when the history continues.
     prev: Option<(crate::passes::common::camera::PassCamera, FrameState)>,
+    /// The frame before the previous one, no longer needed: the passes
+    /// write into its buffers instead of allocating and clearing new ones.
+    spare: Option<FrameState>,
 }
 
 /// The CPU reference backend.
@@ -140,16 +143,13 @@ impl Executor for CpuBackend {
                 camera: plan.camera,
                 frame: frame.clone(),
                 // k = 0 (repeat): nothing tracked, nothing collected.
-                history: history::History {
-                    positions: Vec::new(),
-                    track: Vec::new(),
-                    dynamic: 0,
-                },
+                history: history::History::empty(),
                 k: plan.k,
                 levels: plan.levels,
                 background: Vec::new(),
             },
             prev,
+            spare: self.previous.take(),
         });
         Ok(())
     }
@@ -163,17 +163,21 @@ impl Executor for CpuBackend {
             track: &p.history.track,
         });
         let f = &i.state.frame;
+        let reuse = match i.spare.as_mut() {
+            Some(spare) => std::mem::replace(&mut spare.history, history::History::empty()),
+            None => history::History::empty(),
+        };
         i.state.history = timed(&mut self.timings, Pass::History, || {
-            let (k, epsilon, tolerance) = (plan.k, plan.epsilon, plan.tolerance);
-            history::track(
-                &plan.camera,
-                &f.depth,
-                &f.motion,
-                prev,
-                k,
-                epsilon,
-                tolerance,
-            )
+            let tracker = history::Tracker {
+                camera: &plan.camera,
+                depth: &f.depth,
+                motion: &f.motion,
+                prev: prev.as_ref(),
+                k: plan.k,
+                epsilon: plan.epsilon,
+                tolerance: plan.tolerance,
+            };
+            tracker.track_into(reuse)
         });
         Ok(())
     }
@@ -190,18 +194,19 @@ impl Executor for CpuBackend {
             });
         let n = i.state.frame.depth.len();
         let (h, color) = (&i.state.history, &i.state.frame.color);
+        let reuse = i
+            .spare
+            .as_mut()
+            .map(|s| std::mem::take(&mut s.background))
+            .unwrap_or_default();
         i.state.background = timed(&mut self.timings, Pass::Background, || {
-            let p0 = &h.positions[..n];
-            let tolerance = plan.tolerance;
-            background::collect(
-                &plan.camera,
-                p0,
-                &h.track,
+            let seeds = background::Seeds {
+                p0: &h.positions[..n],
+                track: &h.track,
                 color,
-                plan.levels,
-                prev,
-                tolerance,
-            )
+            };
+            let (levels, tolerance) = (plan.levels, plan.tolerance);
+            background::collect(reuse, &plan.camera, seeds, levels, prev, tolerance)
         });
         Ok(())
     }

@@ -66,25 +66,34 @@ pub struct PrevBackground<'a> {
 }
 
 /// CPU reference of step 1: level 0 from the confirmed static fragments;
-/// the other levels empty.
-pub fn init(p0: &[[f32; 4]], track: &[u32], color: &[[f32; 4]], levels: Levels) -> Vec<Texel> {
-    let mut bg = crate::par::filled(Texel::default(), levels.total() as usize);
+/// the other levels empty. Into `reuse` when it has the right size (every
+/// texel is written).
+pub fn init(reuse: Vec<Texel>, from: Seeds<'_>, levels: Levels) -> Vec<Texel> {
+    use rayon::prelude::*;
+    let Seeds { p0, track, color } = from;
+    let mut bg = reuse;
+    if bg.len() != levels.total() as usize {
+        bg = crate::par::filled(Texel::default(), levels.total() as usize);
+    }
     if levels.count == 0 {
         return bg;
     }
-    use rayon::prelude::*;
-    bg[..levels.len(0) as usize]
-        .par_iter_mut()
-        .enumerate()
-        .for_each(|(x, slot)| {
-            if seeds(track[x], p0[x]) {
-                let c = color[x];
-                *slot = Texel {
-                    pos: p0[x],
-                    color: [c[0], c[1], c[2], 1.0],
-                };
+    let (level0, coarser) = bg.split_at_mut(levels.len(0) as usize);
+    level0.par_iter_mut().enumerate().for_each(|(x, slot)| {
+        *slot = if seeds(track[x], p0[x]) {
+            let c = color[x];
+            Texel {
+                pos: p0[x],
+                color: [c[0], c[1], c[2], 1.0],
             }
-        });
+        } else {
+            Texel::default()
+        };
+    });
+    coarser
+        .par_iter_mut()
+        .with_min_len(4096)
+        .for_each(|t| *t = Texel::default());
     bg
 }
 
@@ -139,18 +148,29 @@ pub fn candidate(
     Candidate::MISS
 }
 
-/// CPU reference of the whole collection for one rendered frame. `camera`
-/// is `C_t` (centre at the origin); `p0` the frame's `P_0` plane.
+/// What the rendered frame seeds level 0 with (step 1).
+#[derive(Clone, Copy, Debug)]
+pub struct Seeds<'a> {
+    /// The frame's `P_0` plane.
+    pub p0: &'a [[f32; 4]],
+    /// Its track words.
+    pub track: &'a [u32],
+    /// Its colour.
+    pub color: &'a [[f32; 4]],
+}
+
+/// CPU reference of the whole collection for one rendered frame, into
+/// `reuse` where its size fits (a background no longer needed; every texel
+/// is written). `camera` is `C_t` (centre at the origin).
 pub fn collect(
+    reuse: Vec<Texel>,
     camera: &PassCamera,
-    p0: &[[f32; 4]],
-    track: &[u32],
-    color: &[[f32; 4]],
+    from: Seeds<'_>,
     levels: Levels,
     prev: Option<PrevBackground<'_>>,
     tolerance: f32,
 ) -> Vec<Texel> {
-    let mut bg = init(p0, track, color, levels);
+    let mut bg = init(reuse, from, levels);
     let Some(prev) = prev.filter(|p| p.levels.count == levels.count) else {
         return bg;
     };

@@ -62,6 +62,17 @@ pub struct History {
     pub dynamic: u32,
 }
 
+impl History {
+    /// No history (no frame tracked).
+    pub fn empty() -> Self {
+        Self {
+            positions: Vec::new(),
+            track: Vec::new(),
+            dynamic: 0,
+        }
+    }
+}
+
 /// Whether a track word marks a dynamic pixel (`M_dyn = 1`).
 pub fn is_dynamic(track: u32) -> bool {
     track & 1 == 1
@@ -92,28 +103,7 @@ pub fn track(
     epsilon: f32,
     tolerance: f32,
 ) -> History {
-    use rayon::prelude::*;
-    let n = depth.len();
-    let k = (k as usize).clamp(1, MAX_HISTORY);
-    let invalid = [0.0, 0.0, 0.0, W_INVALID];
-    // Filled on all cores: at 720p with k = 2 this is 29 MB.
-    let mut positions = crate::par::filled(invalid, k * n);
-    let mut track_words = vec![0u32; n];
-    // Bands of rows; each band gets its slice of every plane.
-    let band = crate::par::band(camera.width() as usize, n);
-    let mut planes: Vec<_> = positions
-        .chunks_mut(n.max(1))
-        .map(|p| p.chunks_mut(band))
-        .collect();
-    let bands: Vec<Band<'_>> = track_words
-        .chunks_mut(band)
-        .enumerate()
-        .map(|(b, words)| {
-            let slices = planes.iter_mut().filter_map(Iterator::next).collect();
-            (b * band, slices, words)
-        })
-        .collect();
-    let pixel = Pixel {
+    let tracker = Tracker {
         camera,
         depth,
         motion,
@@ -122,46 +112,92 @@ pub fn track(
         epsilon,
         tolerance,
     };
-    let dynamic = bands
-        .into_par_iter()
-        .map(|(start, mut planes, words)| {
-            let mut dynamic = 0;
-            for (o, word) in words.iter_mut().enumerate() {
-                let Some((entries, w)) = pixel.track(start + o) else {
-                    continue;
-                };
-                for (plane, e) in planes.iter_mut().zip(entries) {
-                    plane[o] = e;
-                }
-                *word = w;
-                dynamic += u32::from(is_dynamic(w));
-            }
-            dynamic
-        })
-        .sum();
-    History {
-        positions,
-        track: track_words,
-        dynamic,
-    }
+    tracker.track_into(History::empty())
 }
 
 /// A band of rows for one task: its first pixel, its slice of every plane,
 /// its track words.
 type Band<'a> = (usize, Vec<&'a mut [[f32; 4]]>, &'a mut [u32]);
 
-/// What Algorithm 1 reads for every pixel.
-struct Pixel<'a> {
-    camera: &'a PassCamera,
-    depth: &'a [f32],
-    motion: &'a [[f32; 2]],
-    prev: Option<&'a PrevHistory<'a>>,
-    k: usize,
-    epsilon: f32,
-    tolerance: f32,
+/// What Algorithm 1 reads for every pixel: [`track`]'s arguments.
+#[derive(Clone, Copy, Debug)]
+pub struct Tracker<'a> {
+    /// `C_t`, centre at the origin.
+    pub camera: &'a PassCamera,
+    /// The frame's sanitised depth.
+    pub depth: &'a [f32],
+    /// Its motion to the previous frame.
+    pub motion: &'a [[f32; 2]],
+    /// The previous frame's history, when it continues.
+    pub prev: Option<&'a PrevHistory<'a>>,
+    /// History length (clamped to `1..=MAX_HISTORY`).
+    pub k: u32,
+    /// Static-test threshold, pixels.
+    pub epsilon: f32,
+    /// Relative depth tolerance of the confirmation.
+    pub tolerance: f32,
 }
 
-impl Pixel<'_> {
+impl Tracker<'_> {
+    /// Algorithm 1 for every pixel, into the buffers of `reuse`, a history
+    /// that is no longer needed (the CPU executor's frame before the
+    /// previous one), where their sizes fit: every element is written, so
+    /// they are not cleared first and no frame-sized allocation is made
+    /// again each frame.
+    pub fn track_into(&self, reuse: History) -> History {
+        use rayon::prelude::*;
+        let (n, k) = (self.depth.len(), self.k());
+        let invalid = [0.0, 0.0, 0.0, W_INVALID];
+        let mut positions = reuse.positions;
+        if positions.len() != k * n {
+            positions = crate::par::filled(invalid, k * n);
+        }
+        let mut track_words = reuse.track;
+        if track_words.len() != n {
+            track_words = crate::par::filled(0, n);
+        }
+        // Bands of rows; each band gets its slice of every plane.
+        let band = crate::par::band(self.camera.width() as usize, n);
+        let mut planes: Vec<_> = positions
+            .chunks_mut(n.max(1))
+            .map(|p| p.chunks_mut(band))
+            .collect();
+        let bands: Vec<Band<'_>> = track_words
+            .chunks_mut(band)
+            .enumerate()
+            .map(|(b, words)| {
+                let slices = planes.iter_mut().filter_map(Iterator::next).collect();
+                (b * band, slices, words)
+            })
+            .collect();
+        let dynamic = bands
+            .into_par_iter()
+            .map(|(start, mut planes, words)| {
+                let mut dynamic = 0;
+                for (o, word) in words.iter_mut().enumerate() {
+                    // Every element is written, valid or not.
+                    let (entries, w) = self.track(start + o).unwrap_or(([invalid; MAX_HISTORY], 0));
+                    for (plane, e) in planes.iter_mut().zip(entries) {
+                        plane[o] = e;
+                    }
+                    *word = w;
+                    dynamic += u32::from(is_dynamic(w));
+                }
+                dynamic
+            })
+            .sum();
+        History {
+            positions,
+            track: track_words,
+            dynamic,
+        }
+    }
+
+    /// The history length in use.
+    fn k(&self) -> usize {
+        (self.k as usize).clamp(1, MAX_HISTORY)
+    }
+
     /// Pixel `x`'s positions `P_0..P_{k−1}` and track word; `None` for an
     /// invalid depth (no position at all).
     #[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
@@ -170,11 +206,11 @@ impl Pixel<'_> {
             camera,
             depth,
             motion,
-            k,
             epsilon,
             tolerance,
             ..
         } = *self;
+        let k = self.k();
         let width = camera.width();
         let d = depth[x];
         if d.is_nan() || d <= 0.0 {
