@@ -674,17 +674,20 @@ impl Executor for GpuBackend {
         let job = *job;
         self.record(Pass::BgFill, |p, enc| {
             let (c, g, k) = (p.cur, p.g, p.kernels);
-            let params = GpuBgFill::params(
-                p.ctx,
-                &job.target,
-                &c.camera,
-                job.map,
-                c.levels,
-                job.bg_target,
-            );
+            // The warp ran from this frame's history, so the level-0
+            // fragments its static pixels seeded are skipped
+            // (`background::seeds`).
+            let levels = (c.levels, job.bg_target);
+            let params = GpuBgFill::params(p.ctx, &job.target, &c.camera, job.map, levels, c.n);
             let texels = c.levels.total();
-            k.bgfill
-                .encode_project(p.ctx, enc, &params, &c.background, texels, &g.candidates);
+            k.bgfill.encode_project(
+                p.ctx,
+                enc,
+                &params,
+                (&c.background, texels),
+                &g.candidates,
+                (&c.track, &c.positions),
+            );
             g.splat(p, enc, u64::from(texels), u64::from(job.bg_target.total()));
             k.bgfill.encode_resolve(
                 p.ctx,

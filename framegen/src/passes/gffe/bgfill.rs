@@ -119,6 +119,8 @@ struct Params {
     target_offsets: [u32; 4],
     target_widths: [u32; 4],
     target_heights: [u32; 4],
+    /// Pixels whose level-0 fragments are skipped (0: none), 0, 0, 0.
+    seed: [u32; 4],
 }
 
 /// The GPU pass.
@@ -138,7 +140,9 @@ impl GpuBgFill {
                 ctx,
                 src,
                 "bgfill_project",
-                &[Uniform, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite],
+                &[
+                    Uniform, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite, Read, Read,
+                ],
             ),
             resolve: Kernel::new(
                 ctx,
@@ -151,14 +155,16 @@ impl GpuBgFill {
         }
     }
 
-    /// The uniform both kernels read.
+    /// The uniform both kernels read; `seeded` pixels of the rendered
+    /// frame have level-0 fragments the projection skips (its pixel count
+    /// when the warp ran from the same history, else 0).
     pub fn params(
         ctx: &Rec<'_>,
         target: &PassCamera,
         current: &PassCamera,
         map: DisplayMap,
-        source: Levels,
-        target_levels: Levels,
+        (source, target_levels): (Levels, Levels),
+        seeded: u32,
     ) -> wgpu::Buffer {
         let mut p = Params {
             target: *target,
@@ -174,6 +180,7 @@ impl GpuBgFill {
             target_offsets: [0; 4],
             target_widths: [0; 4],
             target_heights: [0; 4],
+            seed: [seeded, 0, 0, 0],
         };
         for l in 0..source.count.min(MAX_LEVELS) as usize {
             p.source_offsets[l] = source.offset(l as u32);
@@ -185,18 +192,25 @@ impl GpuBgFill {
         ctx.uniform(bytemuck::bytes_of(&p))
     }
 
-    /// Records the projection of every texel into `candidates`.
+    /// Records the projection of every texel of the background `bg` (its
+    /// texel count beside it) into `candidates`; `seeds` are the rendered
+    /// frame's track words and `P_0` plane (read for the seeded pixels of
+    /// [`GpuBgFill::params`]).
     pub fn encode_project(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         params: &wgpu::Buffer,
-        bg: &wgpu::Buffer,
-        texels: u32,
+        (bg, texels): (&wgpu::Buffer, u32),
         candidates: &wgpu::Buffer,
+        (track, p0): (&wgpu::Buffer, &wgpu::Buffer),
     ) {
-        self.project
-            .dispatch(ctx, encoder, &[params, bg, candidates], u64::from(texels));
+        self.project.dispatch(
+            ctx,
+            encoder,
+            &[params, bg, candidates, track, p0],
+            u64::from(texels),
+        );
     }
 
     /// Records the hole fill.

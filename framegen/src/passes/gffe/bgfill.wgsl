@@ -14,6 +14,9 @@ struct FillParams {
     target_offsets: vec4<u32>,
     target_widths: vec4<u32>,
     target_heights: vec4<u32>,
+    // Pixels of the rendered frame whose level-0 fragments may be skipped
+    // (0: none), see `seeded`.
+    seed: vec4<u32>,
 };
 
 @group(0) @binding(0) var<uniform> fp: FillParams;
@@ -25,6 +28,19 @@ struct FillParams {
 @group(0) @binding(6) var<storage, read_write> out_motion: array<vec2<f32>>;
 @group(0) @binding(7) var<storage, read_write> out_mask: array<u32>;
 @group(0) @binding(8) var<storage, read_write> candidates: array<vec2<u32>>;
+@group(0) @binding(9) var<storage, read> track: array<u32>;
+@group(0) @binding(10) var<storage, read> p0: array<vec4<f32>>;
+
+// Whether texel `i` is a level-0 fragment this frame's own static pixel
+// seeded (`background::seeds`): it lands where the warp already wrote and
+// cannot fill a hole.
+fn seeded(i: u32) -> bool {
+    if i >= fp.seed.x {
+        return false;
+    }
+    let w = track[i];
+    return (w & 1u) == 0u && (w & 2u) == 2u && p0[i].w != W_INVALID;
+}
 
 @compute @workgroup_size(256)
 fn bgfill_project(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -33,6 +49,10 @@ fn bgfill_project(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups
         return;
     }
     var out = vec2<u32>(NONE, 0u);
+    if seeded(i) {
+        candidates[i] = out;
+        return;
+    }
     let t = bg[i];
     if t.color.w > 0.5 {
         var l = 0u;
