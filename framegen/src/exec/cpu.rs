@@ -312,13 +312,17 @@ impl Executor for CpuBackend {
         let (cur, out, t) = self.parts()?;
         let (w, h) = (cur.camera.width(), cur.camera.height());
         let f = &cur.frame;
+        // Passes 2–4 in two loops: the uv motion and the candidates are made
+        // per pixel where they are used, without frame-sized buffers
+        // between them (the same values as `normalize`, `project` and the
+        // splat in turn).
         let o = timed(t, Pass::Reproject, || {
-            let uv = reproject::normalize(&f.motion, w, h);
-            let cands = reproject::project(&uv, &f.depth, w, h, job.alpha);
-            let winners = splat::resolve(&cands, f.depth.len());
-            let mut o = Output::empty(w, h);
-            reproject::merge(&winners, &uv, &f.depth, &mut o);
-            o
+            let uv = |i: usize| reproject::uv(f.motion[i], w, h);
+            let n = f.depth.len();
+            let winners = splat::resolve_with(n, 0..n, |i| {
+                reproject::candidate(i, uv(i), f.depth[i], (w, h), job.alpha)
+            });
+            reproject::merge(&winners, uv, &f.depth, (w, h))
         });
         *out = Some(o);
         Ok(())

@@ -4,15 +4,20 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{Output, WARPED};
+use crate::output::{Output, Pixel, WARPED};
 use crate::passes::common::camera::{cell, pixel_center};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 
 /// Pass 2: motion in pixels → motion in uv (pixels / size, y down).
 pub fn normalize(motion: &[[f32; 2]], width: u32, height: u32) -> Vec<[f32; 2]> {
     use rayon::prelude::*;
-    let (w, h) = (width as f32, height as f32);
-    motion.par_iter().map(|m| [m[0] / w, m[1] / h]).collect()
+    motion.par_iter().map(|m| uv(*m, width, height)).collect()
+}
+
+/// One element of [`normalize`].
+#[inline]
+pub fn uv(m: [f32; 2], width: u32, height: u32) -> [f32; 2] {
+    [m[0] / width as f32, m[1] / height as f32]
 }
 
 /// Pass 3: where each current pixel is at α (0 = previous frame, 1 =
@@ -26,38 +31,54 @@ pub fn project(
     alpha: f32,
 ) -> Vec<Candidate> {
     use rayon::prelude::*;
-    let size = Vec2::new(width as f32, height as f32);
     uv_motion
         .par_iter()
         .zip(depth)
         .enumerate()
-        .map(|(i, (m, &d))| {
-            if d.is_nan() || d <= 0.0 {
-                return Candidate::MISS;
-            }
-            let at = pixel_center(i, width) + Vec2::from_array(*m) * size * (1.0 - alpha);
-            cell(at, width, height, 1.0)
-                .map(|slot| Candidate {
-                    slot,
-                    key: depth_key(d),
-                })
-                .unwrap_or(Candidate::MISS)
-        })
+        .map(|(i, (m, &d))| candidate(i, *m, d, (width, height), alpha))
         .collect()
 }
 
-/// Pass 4: every written pixel of `out` takes its winner's uv motion and
-/// depth and is flagged written ([`WARPED`]); the rest stay empty.
-pub fn merge(winners: &Winners, uv_motion: &[[f32; 2]], depth: &[f32], out: &mut Output) {
-    use rayon::prelude::*;
-    out.par_pixels_mut().for_each(|(t, px)| {
-        if let Some(i) = winners.winner(t) {
-            *px.motion = uv_motion[i];
-            *px.depth = depth[i];
-            *px.color = [0.0, 0.0, 0.0, 1.0];
-            *px.mask = WARPED;
-        }
-    });
+/// One element of [`project`]: pixel `i` with uv motion `m` and depth `d`.
+#[inline]
+pub fn candidate(
+    i: usize,
+    m: [f32; 2],
+    d: f32,
+    (width, height): (u32, u32),
+    alpha: f32,
+) -> Candidate {
+    if d.is_nan() || d <= 0.0 {
+        return Candidate::MISS;
+    }
+    let size = Vec2::new(width as f32, height as f32);
+    let at = pixel_center(i, width) + Vec2::from_array(m) * size * (1.0 - alpha);
+    cell(at, width, height, 1.0)
+        .map(|slot| Candidate {
+            slot,
+            key: depth_key(d),
+        })
+        .unwrap_or(Candidate::MISS)
+}
+
+/// Pass 4: the `width × height` output whose written pixels take their
+/// winner's uv motion (`uv_of(i)`) and depth and are flagged written
+/// ([`WARPED`]); the rest stay empty.
+pub fn merge(
+    winners: &Winners,
+    uv_of: impl Fn(usize) -> [f32; 2] + Sync + Send,
+    depth: &[f32],
+    (width, height): (u32, u32),
+) -> Output {
+    Output::from_fn(width, height, |t| match winners.winner(t) {
+        Some(i) => Pixel {
+            color: [0.0, 0.0, 0.0, 1.0],
+            depth: depth[i],
+            motion: uv_of(i),
+            mask: WARPED,
+        },
+        None => Pixel::EMPTY,
+    })
 }
 
 #[repr(C)]
