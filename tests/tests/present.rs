@@ -107,17 +107,22 @@ async fn repeat_shows_only_rendered_and_repeated_frames() {
 }
 
 /// The wgpu backend in the same loop: it runs and accounts every slot it
-/// presents (how many it keeps up with depends on the adapter).
+/// presents (how many it keeps up with depends on the adapter). Four
+/// seconds: on a loaded two-core machine a debug build on lavapipe once
+/// presented only 11 rendered frames and no generated one in two.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_wgpu_backend_presents_generated_frames() {
-    let r = present(Method::Gffe, 2.0, true).await;
+    let seconds = 4.0;
+    let r = present(Method::Gffe, seconds, true).await;
     assert!(r.backend.starts_with("wgpu"), "{}", r.backend);
     assert!(
         r.summary.rendered >= 1 && r.summary.extrapolated >= 1,
-        "{:?}",
-        r.summary
+        "{:?}; received {}, generation ms {:?}",
+        r.summary,
+        r.received,
+        r.generation_ms
     );
-    let slots = (2000.0f64 / (1000.0 / 60.0)).floor() as i64 + 1;
+    let slots = (seconds * 1000.0 / (1000.0 / 60.0)).floor() as i64 + 1;
     assert!((r.records.len() as i64 + r.missed_vsyncs as i64 - slots).abs() <= 1);
 }
 
