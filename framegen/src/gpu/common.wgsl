@@ -11,8 +11,9 @@ struct Cam {
     eye: vec4<f32>,
     // tan(fov_y / 2) * aspect, tan(fov_y / 2), pixel scales a_x, a_y.
     proj: vec4<f32>,
-    // Window u0, v1, width, height (base NDC).
-    window: vec4<f32>,
+    // The ray map: pixel p looks along (r.x + p.x * r.y, r.z + p.y * r.w, -1)
+    // in view space (window, image size and proj folded in).
+    ray: vec4<f32>,
     // Image width, height (pixels), pixel offsets b_x, b_y: a view-space
     // point v at depth z lands at (v.x / z * a_x + b_x, v.y / z * a_y + b_y).
     size: vec4<f32>,
@@ -47,9 +48,7 @@ fn is_inf(d: f32) -> bool {
 // Position (w = 1) or direction (w = 0) seen through pixel centre `px` at
 // linear depth `d` (> 0, +inf for sky). Relative to the reference origin.
 fn unproject(cam: Cam, px: vec2<f32>, d: f32) -> vec4<f32> {
-    let ndc_x = cam.window.x + px.x / cam.size.x * cam.window.z;
-    let ndc_y = cam.window.y - px.y / cam.size.y * cam.window.w;
-    let ray = vec3<f32>(ndc_x * cam.proj.x, ndc_y * cam.proj.y, -1.0);
+    let ray = vec3<f32>(cam.ray.x + px.x * cam.ray.y, cam.ray.z + px.y * cam.ray.w, -1.0);
     let world = cam.col0.xyz * ray.x + cam.col1.xyz * ray.y + cam.col2.xyz * ray.z;
     if is_inf(d) {
         return vec4<f32>(normalize(world), W_DIRECTION);

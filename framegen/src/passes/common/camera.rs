@@ -40,8 +40,11 @@ pub struct PassCamera {
     /// `(v_x / z · a_x + b_x, v_y / z · a_y + b_y)`, one division per
     /// projection.
     pub proj: [f32; 4],
-    /// Window `u0`, `v1`, width, height in base NDC.
-    pub window: [f32; 4],
+    /// The unprojection's ray map, folded from the window (`u0`, `v1`,
+    /// width, height in base NDC), the image size and `proj`: pixel `p`
+    /// looks along the view-space ray `(r_0 + p_x·r_1, r_2 + p_y·r_3, −1)`,
+    /// no division per pixel.
+    pub ray: [f32; 4],
     /// Image width and height in pixels, and the projection's pixel
     /// offsets `b_x = −u0 · width / window_w`, `b_y = v1 · height /
     /// window_h` (see `proj`).
@@ -74,18 +77,15 @@ impl PassCamera {
         // The image-from-view map, folded in f64 once per camera.
         let (ax, ay) = (sw / (px * w.width()), -sh / (py * w.height()));
         let (bx, by) = (-w.u0 * sw / w.width(), w.v1 * sh / w.height());
+        // The view-from-image map (rays through pixels), folded the same way.
+        let (rx, ry) = (px * w.width() / sw, -py * w.height() / sh);
         Self {
             col0: col(DVec3::X),
             col1: col(DVec3::Y),
             col2: col(DVec3::Z),
             eye: [eye.x, eye.y, eye.z, 0.0],
             proj: [px as f32, py as f32, ax as f32, ay as f32],
-            window: [
-                w.u0 as f32,
-                w.v1 as f32,
-                w.width() as f32,
-                w.height() as f32,
-            ],
+            ray: [(w.u0 * px) as f32, rx as f32, (w.v1 * py) as f32, ry as f32],
             size: [size.width as f32, size.height as f32, bx as f32, by as f32],
         }
     }
@@ -110,9 +110,11 @@ impl PassCamera {
     /// continuous pixel position `px` at linear depth `depth` (> 0).
     #[inline]
     pub fn unproject(&self, px: Vec2, depth: f32) -> [f32; 4] {
-        let ndc_x = self.window[0] + px.x / self.size[0] * self.window[2];
-        let ndc_y = self.window[1] - px.y / self.size[1] * self.window[3];
-        let ray = Vec3::new(ndc_x * self.proj[0], ndc_y * self.proj[1], -1.0);
+        let ray = Vec3::new(
+            self.ray[0] + px.x * self.ray[1],
+            self.ray[2] + px.y * self.ray[3],
+            -1.0,
+        );
         let world = self.c(0) * ray.x + self.c(1) * ray.y + self.c(2) * ray.z;
         if depth == f32::INFINITY {
             let d = world.normalize();

@@ -36,9 +36,7 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::passes::common::camera::{
-    PassCamera, W_DIRECTION, W_INVALID, cell, pixel_center, rebase,
-};
+use crate::passes::common::camera::{PassCamera, W_DIRECTION, W_INVALID, cell, rebase};
 
 /// The previous rendered frame's history, as the current frame sees it.
 #[derive(Clone, Copy, Debug)]
@@ -170,18 +168,26 @@ impl Tracker<'_> {
                 (b * band, slices, words)
             })
             .collect();
+        let width = (self.camera.width() as usize).max(1);
         let dynamic = bands
             .into_par_iter()
             .map(|(start, mut planes, words)| {
                 let mut dynamic = 0;
-                for (o, word) in words.iter_mut().enumerate() {
-                    // Every element is written, valid or not.
-                    let (entries, w) = self.track(start + o).unwrap_or(([invalid; MAX_HISTORY], 0));
-                    for (plane, e) in planes.iter_mut().zip(entries) {
-                        plane[o] = e;
+                let mut entries = [invalid; MAX_HISTORY];
+                // Whole rows: the pixel centre is counted, not divided out.
+                for (r, row) in words.chunks_mut(width).enumerate() {
+                    let first = r * width;
+                    let y = ((start + first) / width) as f32 + 0.5;
+                    for (c, word) in row.iter_mut().enumerate() {
+                        let center = Vec2::new(c as f32 + 0.5, y);
+                        // Every element is written, valid or not.
+                        let w = self.track(start + first + c, center, &mut entries);
+                        for (plane, e) in planes.iter_mut().zip(&entries) {
+                            plane[first + c] = *e;
+                        }
+                        *word = w;
+                        dynamic += u32::from(is_dynamic(w));
                     }
-                    *word = w;
-                    dynamic += u32::from(is_dynamic(w));
                 }
                 dynamic
             })
@@ -198,10 +204,12 @@ impl Tracker<'_> {
         (self.k as usize).clamp(1, MAX_HISTORY)
     }
 
-    /// Pixel `x`'s positions `P_0..P_{k−1}` and track word; `None` for an
+    /// Pixel `x` (centre `center`): its positions `P_0..P_{k−1}` into
+    /// `entries[..k]` and its track word; all invalid (word 0) for an
     /// invalid depth (no position at all).
     #[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
-    fn track(&self, x: usize) -> Option<([[f32; 4]; MAX_HISTORY], u32)> {
+    #[inline]
+    fn track(&self, x: usize, center: Vec2, entries: &mut [[f32; 4]; MAX_HISTORY]) -> u32 {
         let Self {
             camera,
             depth,
@@ -214,11 +222,11 @@ impl Tracker<'_> {
         let width = camera.width();
         let d = depth[x];
         if d.is_nan() || d <= 0.0 {
-            return None;
+            *entries = [[0.0, 0.0, 0.0, W_INVALID]; MAX_HISTORY];
+            return 0;
         }
-        let center = pixel_center(x, width);
         let p = camera.unproject(center, d);
-        let mut entries = [p; MAX_HISTORY];
+        *entries = [p; MAX_HISTORY];
         let mut word = ((k - 1) as u32) << 2;
         if let Some(prev) = self.prev {
             let target = center + Vec2::from_array(motion[x]);
@@ -269,7 +277,7 @@ impl Tracker<'_> {
                 word = 1 | (len as u32) << 2;
             }
         }
-        Some((entries, word))
+        word
     }
 }
 
