@@ -328,7 +328,8 @@ impl FrameGenerator {
         }
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         // Interpolation runs between the previous frame (α = 0) and the
-        // current one (α = 1): eq. 2 with α − 1 is the linear interpolation.
+        // current one (α = 1): eq. 2 with α − 1 interpolates (the position
+        // linearly, the rotation by slerp).
         let along = method.along(alpha);
         let pose = match source {
             CameraSource::Extrapolated => match &cur.prev_pose {

@@ -6,7 +6,7 @@
 //! |---|---|---|
 //! | 1 history tracking + static test | [`history`] | Alg. 1 (appendix B) |
 //! | 2 position estimation | [`motion`] | eq. 1 |
-//! | 3 camera extrapolation | `protocol::Pose::extrapolate` | eq. 2 |
+//! | 3 camera extrapolation | `protocol::Pose::extrapolate` | eq. 2 (rotation at constant angular velocity) |
 //! | 4 depth-tested forward warp | [`warp`] + `crate::passes::common::splat` | §4.1 |
 //! | 5 layered background collection | [`background`] | §4.2, Fig. 5 |
 //! | 6 background projection into holes | [`bgfill`] | §4.2 |
