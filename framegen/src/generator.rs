@@ -380,6 +380,7 @@ impl FrameGenerator {
             ),
             pushpull: self.settings.pushpull_levels,
             crop,
+            resample: self.settings.resample,
         };
         let interval = match cur.prev_time {
             Some(t) if cur.meta.time > t => cur.meta.time - t,

@@ -4,6 +4,7 @@
 use crate::FramegenError;
 use crate::method::History;
 pub use crate::method::Method;
+pub use crate::passes::common::resample::Resample;
 use crate::passes::gffe::background::MAX_LEVELS;
 use crate::passes::gffe::history::MAX_HISTORY;
 
@@ -37,6 +38,10 @@ pub struct Settings {
     /// The displayed size, when the stream's adaptive window keeps the
     /// rendered size (`KeepSize`); `None` derives it from the window.
     pub display_size: Option<(u32, u32)>,
+    /// How the forward warp (gffe, reproject) takes a winner's colour:
+    /// resampled at the sub-pixel position the target pixel maps back to
+    /// (`passes/common/resample.rs`), or the nearest pixel as in the seed.
+    pub resample: Resample,
 }
 
 impl Default for Settings {
@@ -52,6 +57,7 @@ impl Default for Settings {
             cut_dynamic_fraction: 0.9,
             max_alpha: 16.0,
             display_size: None,
+            resample: Resample::CatmullRom,
         }
     }
 }

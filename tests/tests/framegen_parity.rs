@@ -352,10 +352,18 @@ fn whole_pipeline_matches_on_opengl() {
 }
 
 fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
+    // Every method at its defaults, and the warp's other colour filters.
+    let mut settings: Vec<Settings> = Method::ALL.map(Settings::for_method).to_vec();
+    for resample in [framegen::Resample::Nearest, framegen::Resample::Bilinear] {
+        settings.push(Settings {
+            resample,
+            ..Settings::for_method(Method::Gffe)
+        });
+    }
     for scene in tests::HARD_CASES {
         let fs = frames(scene, 30, 4);
-        for method in Method::ALL {
-            let s = Settings::for_method(method);
+        for &s in &settings {
+            let method = s.method;
             let mut cpu = FrameGenerator::cpu(s).unwrap();
             let mut gpu = FrameGenerator::gpu(s, ctx.clone()).unwrap();
             for f in &fs {

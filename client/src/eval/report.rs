@@ -84,6 +84,8 @@ pub struct Row {
     pub pushpull_levels: u32,
     /// Static threshold ε (px).
     pub static_epsilon: f32,
+    /// The warp's colour filter.
+    pub resample: &'static str,
     /// Adaptive window mode.
     pub window: &'static str,
     /// `WxH`.
@@ -122,6 +124,7 @@ impl Row {
             background_levels: s.effective_levels(),
             pushpull_levels: s.pushpull_levels,
             static_epsilon: s.static_epsilon,
+            resample: s.resample.name(),
             window: window_name(v.window),
             size: format!("{}x{}", v.size.width, v.size.height),
             added_latency_frames: v.added_latency_frames(),

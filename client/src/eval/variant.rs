@@ -2,7 +2,7 @@
 //! trades time for accuracy (issue 8, DESIGN §9), one axis at a time
 //! around the defaults.
 
-use framegen::{Method, Settings};
+use framegen::{Method, Resample, Settings};
 use protocol::FrameSize;
 use protocol::wire::WindowMode;
 use serde::Serialize;
@@ -21,6 +21,8 @@ pub enum Axis {
     Pyramid,
     /// The static-test threshold ε (Alg. 1).
     Epsilon,
+    /// The warp's colour filter (sub-pixel resampling).
+    Resample,
     /// The adaptive rendering window (GFFE §4.3, DESIGN §4.5).
     Window,
     /// Generated frames per rendered frame.
@@ -38,6 +40,7 @@ impl Axis {
             Axis::Levels => "background levels L (gffe)",
             Axis::Pyramid => "push-pull pyramid depth",
             Axis::Epsilon => "static threshold ε (gffe)",
+            Axis::Resample => "warp colour filter (gffe, reproject)",
             Axis::Window => "adaptive window",
             Axis::N => "generated frames per rendered frame n",
             Axis::Resolution => "resolution",
@@ -50,8 +53,8 @@ impl Axis {
 pub enum Sweep {
     /// The four methods at their defaults.
     Methods,
-    /// Every axis (history, levels, pyramid, ε, window, n) around the
-    /// defaults.
+    /// Every axis (history, levels, pyramid, ε, colour filter, window, n)
+    /// around the defaults.
     Full,
 }
 
@@ -146,6 +149,19 @@ pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
             s,
             size,
         ));
+    }
+    for method in [Method::Reproject, Method::Gffe] {
+        for filter in Resample::ALL {
+            if filter == at(method).resample {
+                continue;
+            }
+            let s = Settings {
+                resample: filter,
+                ..at(method)
+            };
+            let label = format!("{method} filter={filter}");
+            out.push(Variant::new(Axis::Resample, label, s, size));
+        }
     }
     if windows {
         // Interpolation works on the rendered grid and ignores the window.

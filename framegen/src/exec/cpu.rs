@@ -4,12 +4,14 @@
 //! the only adapter is a software rasteriser.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::time::Instant;
 
 use crate::FramegenError;
 use crate::input::Prepared;
 use crate::output::Output;
 use crate::passes::common::levels::Levels;
+use crate::passes::common::resample::{Resample, Source};
 use crate::passes::common::splat;
 use crate::passes::common::{crop, pushpull};
 use crate::passes::gffe::{background, bgfill, history, motion, warp};
@@ -55,6 +57,10 @@ pub struct CpuBackend {
     /// pixel inside the warp's projection, so no frame of positions at α
     /// is stored.
     motion: Option<f32>,
+    /// Where each source pixel landed in the last warp (the bits of its
+    /// continuous target position), for the resampling filter; kept from
+    /// frame to frame.
+    landings: Vec<AtomicU64>,
 }
 
 fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
@@ -262,16 +268,45 @@ impl Executor for CpuBackend {
             .motion
             .take()
             .ok_or(FramegenError::PassOrder("warp() before motion()"))?;
+        let landings = &mut self.landings;
         let out = timed(&mut self.timings, Pass::Warp, || {
             let (w, h) = (job.target.width(), job.target.height());
             let (positions, track) = (&cur.history.positions, &cur.history.track);
+            let filtered = job.resample != Resample::Nearest;
+            if filtered && landings.len() != track.len() {
+                *landings = (0..track.len()).map(|_| AtomicU64::new(0)).collect();
+            }
+            // Each landing position is kept where it is made (its own
+            // element, written once, read only for winners).
+            let landings = &*landings;
             let winners = splat::resolve_with(track.len(), 0..(w * h) as usize, |x| {
                 let p = motion::estimate_at(positions, track, cur.k, x, alpha);
-                warp::candidate(p, &job.target)
+                let (candidate, pixel) = warp::candidate_at(p, &job.target);
+                if filtered && candidate.slot != splat::NONE {
+                    let bits = u64::from(pixel.x.to_bits()) << 32 | u64::from(pixel.y.to_bits());
+                    landings[x].store(bits, Relaxed);
+                }
+                candidate
             });
-            let source_width = cur.camera.width();
-            let color = &cur.frame.color;
-            let mut out = warp::resolve(&winners, color, source_width, job.map, (w, h));
+            let f = &cur.frame;
+            let source = Source {
+                color: &f.color,
+                depth: &f.depth,
+                size: (cur.camera.width(), cur.camera.height()),
+            };
+            let landing = |i: usize| {
+                let bits = landings[i].load(Relaxed);
+                glam::Vec2::new(
+                    f32::from_bits((bits >> 32) as u32),
+                    f32::from_bits(bits as u32),
+                )
+            };
+            let how = warp::Resolve {
+                map: job.map,
+                filter: job.resample,
+                size: (w, h),
+            };
+            let mut out = warp::resolve(&winners, source, landing, how);
             warp::close_cracks(&mut out);
             out
         });

@@ -22,7 +22,7 @@ use crate::passes::gffe::background::{GpuBackground, Texel as BgTexel};
 use crate::passes::gffe::bgfill::GpuBgFill;
 use crate::passes::gffe::history::{GpuHistory, GpuHistoryBuffers};
 use crate::passes::gffe::motion::GpuMotion;
-use crate::passes::gffe::warp::{GpuOutput, GpuWarp};
+use crate::passes::gffe::warp::{GpuOutput, GpuSource, GpuWarp, Resolve};
 use crate::passes::interp::reproject::GpuReproject;
 use crate::passes::interp::resolve::{GpuImage, GpuResolve};
 use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapshot};
@@ -656,15 +656,23 @@ impl Executor for GpuBackend {
             k.warp
                 .encode_project(p.ctx, enc, &job.target, &g.next, c.n, &g.candidates);
             g.splat(p, enc, u64::from(c.n), u64::from(g.tn));
+            let source = GpuSource {
+                color: &c.color,
+                depth: &c.depth,
+                next: &g.next,
+                size: (c.camera.width(), c.camera.height()),
+            };
+            let how = Resolve {
+                map: job.map,
+                filter: job.resample,
+                size: (job.target.width(), job.target.height()),
+            };
             k.warp.encode_resolve(
                 p.ctx,
                 enc,
-                &job.target,
-                &c.color,
-                c.camera.width(),
-                job.map,
-                &g.keys,
-                &g.winners,
+                (&job.target, how),
+                source,
+                (&g.keys, &g.winners),
                 g.out(),
             );
         })

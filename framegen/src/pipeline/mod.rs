@@ -15,6 +15,7 @@ use crate::output::{DisplayMap, Output};
 use crate::passes::common::camera::PassCamera;
 use crate::passes::common::crop::Crop;
 use crate::passes::common::levels::Levels;
+use crate::passes::common::resample::Resample;
 use crate::settings::Method;
 
 /// A pass, for timings.
@@ -117,6 +118,8 @@ pub struct Job {
     pub pushpull: u32,
     /// The displayed region of the rendered frame (repeat).
     pub crop: Crop,
+    /// How the warp takes a winner's colour.
+    pub resample: Resample,
 }
 
 /// The generation passes, one method per pass, as an executor runs them on

@@ -20,7 +20,10 @@
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{CRACK, DisplayMap, EMPTY, Output, Pixel, WARPED};
+use glam::Vec2;
+
 use crate::passes::common::camera::{PassCamera, cell, pixel_center};
+use crate::passes::common::resample::{self, Resample, Source};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 
 /// CPU reference of `warp_project`: one candidate per source pixel.
@@ -34,44 +37,71 @@ pub fn project(next: &[[f32; 4]], target: &PassCamera) -> Vec<Candidate> {
 /// and its depth key.
 #[inline]
 pub fn candidate(p: [f32; 4], target: &PassCamera) -> Candidate {
-    target
-        .project(p)
-        .and_then(|r| {
-            cell(r.pixel, target.width(), target.height(), 1.0).map(|slot| Candidate {
-                slot,
-                key: depth_key(r.depth),
-            })
-        })
-        .unwrap_or(Candidate::MISS)
+    candidate_at(p, target).0
+}
+
+/// [`candidate`] and the continuous target position it lands at (only
+/// meaningful when the candidate has a slot).
+#[inline]
+pub fn candidate_at(p: [f32; 4], target: &PassCamera) -> (Candidate, Vec2) {
+    let Some(r) = target.project(p) else {
+        return (Candidate::MISS, Vec2::ZERO);
+    };
+    let c = cell(r.pixel, target.width(), target.height(), 1.0).map(|slot| Candidate {
+        slot,
+        key: depth_key(r.depth),
+    });
+    (c.unwrap_or(Candidate::MISS), r.pixel)
+}
+
+/// How `warp_resolve` takes a winner's colour: the filter, and the map
+/// from rendered to displayed pixels (motion vectors point through it).
+#[derive(Clone, Copy, Debug)]
+pub struct Resolve {
+    /// Rendered pixels → displayed pixels of the rendered frame.
+    pub map: DisplayMap,
+    /// The colour filter.
+    pub filter: Resample,
+    /// Target width and height.
+    pub size: (u32, u32),
 }
 
 /// CPU reference of `warp_resolve`: the `width × height` output with every
-/// won pixel written, the rest holes.
+/// won pixel written, the rest holes. A winner's colour is resampled at
+/// the sub-pixel position its target pixel's centre maps back to
+/// (`resample.rs`); `landing(i)` is where source pixel `i` lands in the
+/// target. Its motion points to that position in the rendered frame's
+/// displayed region, so colour and motion agree.
 pub fn resolve(
     winners: &Winners,
-    color: &[[f32; 4]],
-    source_width: u32,
-    map: DisplayMap,
-    (width, height): (u32, u32),
+    source: Source<'_>,
+    landing: impl Fn(usize) -> Vec2 + Sync + Send,
+    how: Resolve,
 ) -> Output {
+    let (width, height) = how.size;
     Output::from_fn(width, height, |t| {
         let Some(i) = winners.winner(t) else {
             return Pixel::EMPTY;
         };
         let center = pixel_center(t, width);
-        let source = map.apply(pixel_center(i, source_width));
-        let c = color[i];
+        let own = pixel_center(i, source.size.0);
+        let at = match how.filter {
+            Resample::Nearest => own,
+            _ => resample::position(own, landing(i), center, how.map.scale, how.filter),
+        };
+        let c = resample::resample(source, i, at, how.filter);
         Pixel {
             color: [c[0], c[1], c[2], 1.0],
             depth: winners.depth(t).unwrap_or(f32::INFINITY),
-            motion: (source - center).to_array(),
+            motion: (how.map.apply(at) - center).to_array(),
             mask: WARPED,
         }
     })
 }
 
-/// Largest ratio between the depths of a crack's two neighbours.
-pub const CRACK_DEPTH_RATIO: f32 = 1.1;
+/// Largest ratio between the depths of a crack's two neighbours: one
+/// surface, as the resampling filter takes it.
+pub const CRACK_DEPTH_RATIO: f32 = resample::SAME_SURFACE_RATIO;
 
 /// The neighbour pairs a crack is closed from, in the order they are tried.
 const PAIRS: [[(i32, i32); 2]; 4] = [
@@ -134,6 +164,8 @@ struct Params {
     /// source count, target width, target height, source width
     sizes: [u32; 4],
     map: [f32; 4],
+    /// filter code, source height, 0, 0
+    resample: [u32; 4],
 }
 
 /// The GPU pass (project + resolve; the splat between them is shared).
@@ -174,7 +206,8 @@ impl GpuWarp {
                 src,
                 "warp_resolve",
                 &[
-                    Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                    Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite, Skip,
+                    Read, Read,
                 ],
             ),
             cracks: Kernel::new(
@@ -188,17 +221,12 @@ impl GpuWarp {
         }
     }
 
-    fn params(
-        ctx: &Rec<'_>,
-        target: &PassCamera,
-        n: u32,
-        sw: u32,
-        map: DisplayMap,
-    ) -> wgpu::Buffer {
+    fn params(ctx: &Rec<'_>, target: &PassCamera, sizes: [u32; 4], how: Resolve) -> wgpu::Buffer {
         ctx.uniform(bytemuck::bytes_of(&Params {
             target: *target,
-            sizes: [n, target.width(), target.height(), sw],
-            map: map.to_array(),
+            sizes,
+            map: how.map.to_array(),
+            resample: [how.filter.code(), how.size.1, 0, 0],
         }))
     }
 
@@ -212,32 +240,56 @@ impl GpuWarp {
         n: u32,
         candidates: &wgpu::Buffer,
     ) {
-        let params = Self::params(ctx, target, n, 0, DisplayMap::IDENTITY);
+        let sizes = [n, target.width(), target.height(), 0];
+        let how = Resolve {
+            map: DisplayMap::IDENTITY,
+            filter: Resample::Nearest,
+            size: (0, 0),
+        };
+        let params = Self::params(ctx, target, sizes, how);
         self.project
             .dispatch(ctx, encoder, &[&params, next, candidates], u64::from(n));
     }
 
     /// Records `warp_resolve` and `warp_cracks` over the target pixels.
-    #[allow(clippy::too_many_arguments)]
+    /// `source` is the rendered frame's colour and depth with its size
+    /// (`how.size` is replaced by it), `next` the positions at α the
+    /// candidates were projected from.
     pub fn encode_resolve(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        target: &PassCamera,
-        color: &wgpu::Buffer,
-        source_width: u32,
-        map: DisplayMap,
-        keys: &wgpu::Buffer,
-        winners: &wgpu::Buffer,
+        (target, how): (&PassCamera, Resolve),
+        source: GpuSource<'_>,
+        (keys, winners): (&wgpu::Buffer, &wgpu::Buffer),
         out: GpuOutput<'_>,
     ) {
-        let params = Self::params(ctx, target, 0, source_width, map);
+        let (sw, sh) = source.size;
+        let sizes = [0, target.width(), target.height(), sw];
+        let params = Self::params(
+            ctx,
+            target,
+            sizes,
+            Resolve {
+                size: (sw, sh),
+                ..how
+            },
+        );
         let pixels = u64::from(target.width()) * u64::from(target.height());
         self.resolve.dispatch(
             ctx,
             encoder,
             &[
-                &params, color, keys, winners, out.color, out.depth, out.motion, out.mask,
+                &params,
+                source.color,
+                keys,
+                winners,
+                out.color,
+                out.depth,
+                out.motion,
+                out.mask,
+                source.next,
+                source.depth,
             ],
             pixels,
         );
@@ -248,4 +300,17 @@ impl GpuWarp {
             pixels,
         );
     }
+}
+
+/// The rendered frame as `warp_resolve` reads it.
+#[derive(Debug, Clone, Copy)]
+pub struct GpuSource<'a> {
+    /// `vec4<f32>` colour.
+    pub color: &'a wgpu::Buffer,
+    /// `f32` sanitised depth.
+    pub depth: &'a wgpu::Buffer,
+    /// `vec4<f32>` positions at α (GFFE eq. 1).
+    pub next: &'a wgpu::Buffer,
+    /// Width and height.
+    pub size: (u32, u32),
 }

@@ -1,0 +1,346 @@
+//! Sub-pixel resampling of a forward-warped pixel's colour (issue 16 §1;
+//! GFFE §4.1 keeps the splat's nearest pixel).
+//!
+//! The forward splat decides *which* source surface a target pixel shows:
+//! source pixel `i` won target pixel `t` because its position at α lands at
+//! `q_i` inside `t` (depth-tested, deterministic, see `splat.rs`). Copying
+//! `i`'s colour puts it at `t`'s centre `c_t` although it belongs at `q_i`,
+//! up to half a pixel away: every sub-pixel shift aliases fine texture. The
+//! colour that belongs at `c_t` is the source image at `x_i + (c_t − q_i)`,
+//! the warp taken as a local translation (exact for pans and moving
+//! objects; for a scaling warp the error is the scale change times the
+//! offset, a few hundredths of a pixel).
+//!
+//! The source image is read there with a reconstruction filter restricted
+//! to `i`'s own surface: a tap whose depth is not within
+//! [`SAME_SURFACE_RATIO`] of `i`'s (another object across a silhouette, or
+//! no surface) takes no part, so a foreground edge does not bleed into the
+//! background it moved over. The offset is clamped to half a pixel, so `i`
+//! itself is always among the taps.
+//!
+//! * [`Resample::Nearest`]: `i`'s colour (the seed's warp).
+//! * [`Resample::Bilinear`]: 2×2 taps on `i`'s surface, renormalised.
+//! * [`Resample::CatmullRom`]: 4×4 Catmull-Rom taps when all 16 are on
+//!   `i`'s surface, each channel clamped to the range of the inner 2×2
+//!   (no ringing around HDR highlights); otherwise the bilinear taps.
+//!
+//! Filtering runs on linear HDR colour, as it arrives.
+//! `warp.wgsl` mirrors [`resample`] operation by operation.
+
+use glam::{Vec2, Vec4};
+
+/// How a warped pixel takes its colour from the source frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Resample {
+    /// The winning source pixel's colour.
+    Nearest,
+    /// Bilinear on the winner's surface.
+    Bilinear,
+    /// Clamped Catmull-Rom on the winner's surface.
+    CatmullRom,
+}
+
+impl Resample {
+    /// Every filter, cheapest first.
+    pub const ALL: [Resample; 3] = [Resample::Nearest, Resample::Bilinear, Resample::CatmullRom];
+
+    /// The name on command lines and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Resample::Nearest => "nearest",
+            Resample::Bilinear => "bilinear",
+            Resample::CatmullRom => "catmull-rom",
+        }
+    }
+
+    /// The kernels' code for the filter.
+    pub fn code(self) -> u32 {
+        self as u32
+    }
+}
+
+impl std::fmt::Display for Resample {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Resample {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Resample::ALL
+            .into_iter()
+            .find(|r| r.name() == s)
+            .ok_or_else(|| format!("unknown filter {s:?} (nearest, bilinear, catmull-rom)"))
+    }
+}
+
+/// Largest ratio between two depths of one surface (the warp's crack test
+/// uses the same).
+pub const SAME_SURFACE_RATIO: f32 = 1.1;
+
+/// Whether depths `a` and `b` (sanitised: 0 = no surface, `+inf` = sky)
+/// belong to one surface.
+/// (The larger within [`SAME_SURFACE_RATIO`] of the smaller, which must be
+/// a surface; two skies agree, a sky and a point do not.)
+#[inline]
+pub fn same_surface(a: f32, b: f32) -> bool {
+    if a >= b {
+        b > 0.0 && a <= b * SAME_SURFACE_RATIO
+    } else {
+        a > 0.0 && b <= a * SAME_SURFACE_RATIO
+    }
+}
+
+/// The source image a warp resamples.
+#[derive(Clone, Copy, Debug)]
+pub struct Source<'a> {
+    /// Linear RGB (alpha ignored).
+    pub color: &'a [[f32; 4]],
+    /// Sanitised depth.
+    pub depth: &'a [f32],
+    /// Width and height.
+    pub size: (u32, u32),
+}
+
+/// Where the colour of target pixel centre `center` lies in the source
+/// image: the winner `i`'s centre `source` moved by the offset between the
+/// centre and `landing` (where `i` lands in the target), converted to
+/// source pixels by `scale` (target pixels per source pixel) and clamped to
+/// half a pixel. Nearest keeps `source`.
+#[inline]
+pub fn position(source: Vec2, landing: Vec2, center: Vec2, scale: Vec2, mode: Resample) -> Vec2 {
+    if mode == Resample::Nearest {
+        return source;
+    }
+    let offset = ((center - landing) / scale).clamp(Vec2::splat(-0.5), Vec2::splat(0.5));
+    source + offset
+}
+
+/// Catmull-Rom weights of the four taps around a fraction `f ∈ [0, 1)`.
+#[inline]
+fn catmull_rom(f: f32) -> [f32; 4] {
+    let f2 = f * f;
+    let f3 = f2 * f;
+    [
+        -0.5 * f3 + f2 - 0.5 * f,
+        1.5 * f3 - 2.5 * f2 + 1.0,
+        -1.5 * f3 + 2.0 * f2 + 0.5 * f,
+        0.5 * f3 - 0.5 * f2,
+    ]
+}
+
+/// `⌊v⌋` for `|v| < 2³¹` without a library call (baseline x86-64 has no
+/// rounding instruction): the truncation, one less for negative
+/// non-integers.
+#[inline]
+fn floor(v: f32) -> i32 {
+    let t = v as i32;
+    t - i32::from(v < t as f32)
+}
+
+/// The colour of `src` at continuous position `at` with filter `mode`,
+/// restricted to the surface of pixel `own` (see the module doc).
+pub fn resample(src: Source<'_>, own: usize, at: Vec2, mode: Resample) -> [f32; 3] {
+    let fallback = src.color[own];
+    if mode == Resample::Nearest {
+        return [fallback[0], fallback[1], fallback[2]];
+    }
+    let (w, h) = (src.size.0 as i32, src.size.1 as i32);
+    let d0 = src.depth[own];
+    let q = at - 0.5;
+    let (bx, by) = (floor(q.x), floor(q.y));
+    let f = q - Vec2::new(bx as f32, by as f32);
+    // Tap columns and rows bx − 1 ..= bx + 2, by − 1 ..= by + 2, clamped
+    // into the image (rows as offsets of their first pixel).
+    let xs: [usize; 4] = std::array::from_fn(|i| (bx + i as i32 - 1).clamp(0, w - 1) as usize);
+    let ys: [usize; 4] =
+        std::array::from_fn(|j| (by + j as i32 - 1).clamp(0, h - 1) as usize * w as usize);
+    if mode == Resample::CatmullRom {
+        let on = ys
+            .iter()
+            .all(|&y| xs.iter().all(|&x| same_surface(src.depth[y + x], d0)));
+        if on {
+            // Separable: each row along x, then the rows along y.
+            let (wx, wy) = (catmull_rom(f.x), catmull_rom(f.y));
+            let mut sum = Vec4::ZERO;
+            for (&y, wyj) in ys.iter().zip(wy) {
+                let mut across = Vec4::ZERO;
+                for (&x, wxi) in xs.iter().zip(wx) {
+                    across += Vec4::from_array(src.color[y + x]) * wxi;
+                }
+                sum += across * wyj;
+            }
+            let c = [(1, 1), (2, 1), (1, 2), (2, 2)]
+                .map(|(i, j)| Vec4::from_array(src.color[ys[j] + xs[i]]));
+            let lo = c[0].min(c[1]).min(c[2].min(c[3]));
+            let hi = c[0].max(c[1]).max(c[2].max(c[3]));
+            let c = sum.clamp(lo, hi);
+            return [c.x, c.y, c.z];
+        }
+    }
+    let mut sum = Vec4::ZERO;
+    let mut weight = 0.0;
+    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+        let t = ys[dy + 1] + xs[dx + 1];
+        if same_surface(src.depth[t], d0) {
+            let wx = if dx == 0 { 1.0 - f.x } else { f.x };
+            let wy = if dy == 0 { 1.0 - f.y } else { f.y };
+            sum += Vec4::from_array(src.color[t]) * (wx * wy);
+            weight += wx * wy;
+        }
+    }
+    if weight > 1e-6 {
+        let c = sum / weight;
+        return [c.x, c.y, c.z];
+    }
+    [fallback[0], fallback[1], fallback[2]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A horizontal ramp: every linear filter reproduces it exactly, so a
+    /// resampled value is the ramp at the sampled position.
+    fn ramp(w: u32, h: u32) -> (Vec<[f32; 4]>, Vec<f32>) {
+        let color = (0..w * h)
+            .map(|i| {
+                let x = (i % w) as f32 + 0.5;
+                [x, 2.0 * x, 1.0, 1.0]
+            })
+            .collect();
+        (color, vec![5.0; (w * h) as usize])
+    }
+
+    #[test]
+    fn filters_reproduce_a_ramp_at_the_sub_pixel_position() {
+        let (color, depth) = ramp(8, 8);
+        let src = Source {
+            color: &color,
+            depth: &depth,
+            size: (8, 8),
+        };
+        let own = 3 * 8 + 4;
+        let at = Vec2::new(4.5 + 0.3, 3.5 - 0.2);
+        for mode in [Resample::Bilinear, Resample::CatmullRom] {
+            let c = resample(src, own, at, mode);
+            assert!((c[0] - 4.8).abs() < 1e-5, "{mode}: {c:?}");
+            assert!((c[1] - 9.6).abs() < 1e-5, "{mode}: {c:?}");
+        }
+        assert_eq!(resample(src, own, at, Resample::Nearest), [4.5, 9.0, 1.0]);
+    }
+
+    #[test]
+    fn taps_off_the_surface_take_no_part() {
+        let (mut color, mut depth) = ramp(8, 8);
+        // Column 5 is another surface (nearer), bright.
+        for y in 0..8 {
+            depth[y * 8 + 5] = 1.0;
+            color[y * 8 + 5] = [1000.0; 4];
+        }
+        let src = Source {
+            color: &color,
+            depth: &depth,
+            size: (8, 8),
+        };
+        let own = 3 * 8 + 4;
+        for mode in [Resample::Bilinear, Resample::CatmullRom] {
+            let c = resample(src, own, Vec2::new(4.9, 3.5), mode);
+            assert!((c[0] - 4.5).abs() < 1e-5, "{mode}: {c:?}");
+        }
+        // No surface at all around: the pixel's own colour.
+        let none = vec![0.0; 64];
+        let src = Source {
+            depth: &none,
+            ..src
+        };
+        assert_eq!(
+            resample(src, own, Vec2::new(4.9, 3.5), Resample::CatmullRom),
+            [4.5, 9.0, 1.0]
+        );
+    }
+
+    #[test]
+    fn catmull_rom_does_not_ring_around_a_highlight() {
+        let mut color = vec![[1.0f32; 4]; 64];
+        color[3 * 8 + 3] = [60000.0; 4];
+        let depth = vec![5.0; 64];
+        let src = Source {
+            color: &color,
+            depth: &depth,
+            size: (8, 8),
+        };
+        for x in 0..8 {
+            for y in 0..8 {
+                let own = y * 8 + x;
+                let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + Vec2::new(0.37, -0.41);
+                let c = resample(src, own, at, Resample::CatmullRom);
+                assert!(
+                    c.iter()
+                        .all(|v| v.is_finite() && (1.0..=60000.0).contains(v)),
+                    "{c:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_offset_is_clamped_and_nearest_keeps_the_source() {
+        let s = Vec2::new(10.5, 4.5);
+        let p = position(
+            s,
+            Vec2::new(3.2, 3.9),
+            Vec2::new(3.5, 3.5),
+            Vec2::ONE,
+            Resample::Bilinear,
+        );
+        assert!((p - Vec2::new(10.8, 4.1)).length() < 1e-5);
+        let far = position(
+            s,
+            Vec2::ZERO,
+            Vec2::splat(9.0),
+            Vec2::ONE,
+            Resample::CatmullRom,
+        );
+        assert_eq!(far, s + 0.5);
+        let near = position(s, Vec2::ZERO, Vec2::ONE, Vec2::ONE, Resample::Nearest);
+        assert_eq!(near, s);
+    }
+
+    #[test]
+    fn surfaces() {
+        let inf = f32::INFINITY;
+        assert!(same_surface(5.0, 5.4) && same_surface(5.4, 5.0));
+        assert!(!same_surface(5.0, 5.6) && !same_surface(5.6, 5.0));
+        assert!(same_surface(inf, inf));
+        assert!(!same_surface(inf, 5.0) && !same_surface(5.0, inf));
+        assert!(!same_surface(0.0, 0.0) && !same_surface(0.0, 5.0) && !same_surface(5.0, 0.0));
+    }
+
+    #[test]
+    fn floor_is_the_floor() {
+        for v in [
+            -2.5f32,
+            -1.0,
+            -0.5,
+            -1e-7,
+            0.0,
+            1e-7,
+            0.5,
+            1.0,
+            3.999_999_8,
+            1e6 + 0.5,
+        ] {
+            assert_eq!(floor(v), v.floor() as i32, "{v}");
+        }
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for r in Resample::ALL {
+            assert_eq!(r.name().parse::<Resample>().unwrap(), r);
+        }
+        assert!("cubic".parse::<Resample>().is_err());
+    }
+}
