@@ -11,13 +11,16 @@
 //! also has a `render` entry: the renderer drawing the same frames (submit
 //! + readback); divide a method's `total` by it for its cost in renders.
 //!
+//! `gffe-nearest/total` is gffe with the seed's nearest-pixel colour
+//! instead of the default resampling filter (what the filter costs).
+//!
 //! `cargo bench -p tests --bench framegen [-- FILTER]`, e.g. `-- wgpu/1280x720`;
 //! `FRAMEGEN_BENCH_SIZES=960x540,1280x720,1920x1080` by default.
 
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group};
-use framegen::{FrameGenerator, GpuBackend, GpuContext, Method, Pass, Settings};
+use framegen::{FrameGenerator, GpuBackend, GpuContext, Method, Pass, Resample, Settings};
 use protocol::{Frame, FrameSize};
 
 fn sizes() -> Vec<FrameSize> {
@@ -85,10 +88,10 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
         // Per-pass times come from the profiled backend (a submit and a
         // wait per pass); totals from the plain one (one submission per
         // push and per generation), which is what the client runs.
-        let make = |method, profiled: bool| {
+        let make_with = |s: Settings, profiled: bool| {
             let s = Settings {
                 cut_dynamic_fraction: 2.0,
-                ..Settings::for_method(method)
+                ..s
             };
             if gpu {
                 let backend = if profiled {
@@ -102,6 +105,7 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
             }
             .expect("generator")
         };
+        let make = |method, profiled: bool| make_with(Settings::for_method(method), profiled);
         let mut group = c.benchmark_group(format!("{backend}/{label}"));
         group
             // Per-pass benches report one pass's time but run the whole
@@ -164,6 +168,14 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
                 b.iter(|| run(&mut g, &mut feed))
             });
         }
+        // What the warp's default colour filter costs: gffe with the seed's
+        // nearest pixel, in the same run.
+        let nearest = Settings {
+            resample: Resample::Nearest,
+            ..Settings::for_method(Method::Gffe)
+        };
+        let mut g = make_with(nearest, false);
+        group.bench_function("gffe-nearest/total", |b| b.iter(|| run(&mut g, &mut feed)));
         let bytes = size.pixels() * 28;
         if !gpu {
             let src = vec![1u8; bytes as usize];
