@@ -24,6 +24,11 @@
 //!   `i`'s surface, each channel clamped to the range of the inner 2×2
 //!   (no ringing around HDR highlights); otherwise the bilinear taps.
 //!
+//! Where the 2×2 taps around the position are flat to within the `f16`
+//! output's rounding ([`FLAT`]), every filter's result is the pixel itself
+//! to that precision, and the pixel is taken (most of a flat-shaded
+//! surface; the filter's cost is paid at edges and texture).
+//!
 //! Filtering runs on linear HDR colour, as it arrives.
 //! `warp.wgsl` mirrors [`resample`] operation by operation.
 
@@ -74,6 +79,12 @@ impl std::str::FromStr for Resample {
             .ok_or_else(|| format!("unknown filter {s:?} (nearest, bilinear, catmull-rom)"))
     }
 }
+
+/// Relative spread below which taps count as flat: 2⁻¹², at most the
+/// rounding error of the `f16` output (half a step of its 10-bit
+/// mantissa), so taking the pixel itself differs from filtering by less
+/// than the output's own rounding.
+pub const FLAT: f32 = 1.0 / 4096.0;
 
 /// Largest ratio between two depths of one surface (the warp's crack test
 /// uses the same).
@@ -156,6 +167,17 @@ pub fn resample(src: Source<'_>, own: usize, at: Vec2, mode: Resample) -> [f32; 
     let xs: [usize; 4] = std::array::from_fn(|i| (bx + i as i32 - 1).clamp(0, w - 1) as usize);
     let ys: [usize; 4] =
         std::array::from_fn(|j| (by + j as i32 - 1).clamp(0, h - 1) as usize * w as usize);
+    // The inner 2×2 taps (`own` is one of them) bound every result below,
+    // channel by channel: the clamped Catmull-Rom, the bilinear over any
+    // of them, `own`. Where they are flat to within the rounding of the
+    // `f16` output, no filter changes the stored colour: take `own`.
+    let c =
+        [(1, 1), (2, 1), (1, 2), (2, 2)].map(|(i, j)| Vec4::from_array(src.color[ys[j] + xs[i]]));
+    let lo = c[0].min(c[1]).min(c[2].min(c[3]));
+    let hi = c[0].max(c[1]).max(c[2].max(c[3]));
+    if (hi - lo).cmple(hi * FLAT).all() {
+        return [fallback[0], fallback[1], fallback[2]];
+    }
     if mode == Resample::CatmullRom {
         let on = ys
             .iter()
@@ -171,10 +193,6 @@ pub fn resample(src: Source<'_>, own: usize, at: Vec2, mode: Resample) -> [f32; 
                 }
                 sum += across * wyj;
             }
-            let c = [(1, 1), (2, 1), (1, 2), (2, 2)]
-                .map(|(i, j)| Vec4::from_array(src.color[ys[j] + xs[i]]));
-            let lo = c[0].min(c[1]).min(c[2].min(c[3]));
-            let hi = c[0].max(c[1]).max(c[2].max(c[3]));
             let c = sum.clamp(lo, hi);
             return [c.x, c.y, c.z];
         }
@@ -306,6 +324,35 @@ mod tests {
         assert_eq!(far, s + 0.5);
         let near = position(s, Vec2::ZERO, Vec2::ONE, Vec2::ONE, Resample::Nearest);
         assert_eq!(near, s);
+    }
+
+    #[test]
+    fn flat_taps_give_the_pixel_itself() {
+        let mut color = vec![[2.0f32, 3.0, 4.0, 1.0]; 64];
+        // Within the f16 output's rounding of its neighbours.
+        color[3 * 8 + 4] = [2.0 * (1.0 + 1.0 / 8192.0), 3.0, 4.0, 1.0];
+        let depth = vec![5.0; 64];
+        let src = Source {
+            color: &color,
+            depth: &depth,
+            size: (8, 8),
+        };
+        let own = 3 * 8 + 3;
+        for mode in Resample::ALL {
+            assert_eq!(
+                resample(src, own, Vec2::new(3.9, 3.7), mode),
+                [2.0, 3.0, 4.0]
+            );
+        }
+        // A real edge is filtered.
+        color[3 * 8 + 4] = [3.0, 3.0, 4.0, 1.0];
+        let src = Source {
+            color: &color,
+            depth: &depth,
+            size: (8, 8),
+        };
+        let c = resample(src, own, Vec2::new(3.9, 3.7), Resample::Bilinear);
+        assert!(c[0] > 2.1 && c[0] < 3.0, "{c:?}");
     }
 
     #[test]

@@ -17,6 +17,7 @@ struct WarpParams {
 const RESAMPLE_NEAREST: u32 = 0u;
 const RESAMPLE_CATMULL_ROM: u32 = 2u;
 const SAME_SURFACE_RATIO: f32 = 1.1;
+const RESAMPLE_FLAT: f32 = 1.0 / 4096.0;
 
 @group(0) @binding(0) var<uniform> wp: WarpParams;
 // project: next positions; resolve: source color.
@@ -77,6 +78,17 @@ fn resample_at(own: u32, at: vec2<f32>, mode: u32) -> vec3<f32> {
     let basef = floor(q);
     let f = q - basef;
     let base = vec2<i32>(basef);
+    // The inner 2×2 bounds every result; flat to the f16 output's rounding,
+    // the pixel itself (`resample.rs` FLAT).
+    let c0 = source[tap_index(base, 0, 0)];
+    let c1 = source[tap_index(base, 1, 0)];
+    let c2 = source[tap_index(base, 0, 1)];
+    let c3 = source[tap_index(base, 1, 1)];
+    let lo = min(min(c0, c1), min(c2, c3));
+    let hi = max(max(c0, c1), max(c2, c3));
+    if all((hi - lo) <= hi * RESAMPLE_FLAT) {
+        return fallback;
+    }
     if mode == RESAMPLE_CATMULL_ROM {
         var on_surface = true;
         for (var j = 0; j < 4; j++) {
@@ -96,12 +108,6 @@ fn resample_at(own: u32, at: vec2<f32>, mode: u32) -> vec3<f32> {
                 }
                 sum += across * wy[j];
             }
-            let c0 = source[tap_index(base, 0, 0)];
-            let c1 = source[tap_index(base, 1, 0)];
-            let c2 = source[tap_index(base, 0, 1)];
-            let c3 = source[tap_index(base, 1, 1)];
-            let lo = min(min(c0, c1), min(c2, c3));
-            let hi = max(max(c0, c1), max(c2, c3));
             return clamp(sum, lo, hi).xyz;
         }
     }
