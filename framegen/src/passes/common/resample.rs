@@ -116,15 +116,21 @@ pub struct Source<'a> {
 
 /// Where the colour of target pixel centre `center` lies in the source
 /// image: the winner `i`'s centre `source` moved by the offset between the
-/// centre and `landing` (where `i` lands in the target), converted to
+/// centre and `landing()` (where `i` lands in the target), converted to
 /// source pixels by `scale` (target pixels per source pixel) and clamped to
-/// half a pixel. Nearest keeps `source`.
+/// half a pixel. Nearest keeps `source` (and never asks where it landed).
 #[inline]
-pub fn position(source: Vec2, landing: Vec2, center: Vec2, scale: Vec2, mode: Resample) -> Vec2 {
+pub fn position(
+    source: Vec2,
+    landing: impl FnOnce() -> Vec2,
+    center: Vec2,
+    scale: Vec2,
+    mode: Resample,
+) -> Vec2 {
     if mode == Resample::Nearest {
         return source;
     }
-    let offset = ((center - landing) / scale).clamp(Vec2::splat(-0.5), Vec2::splat(0.5));
+    let offset = ((center - landing()) / scale).clamp(Vec2::splat(-0.5), Vec2::splat(0.5));
     source + offset
 }
 
@@ -308,7 +314,7 @@ mod tests {
         let s = Vec2::new(10.5, 4.5);
         let p = position(
             s,
-            Vec2::new(3.2, 3.9),
+            || Vec2::new(3.2, 3.9),
             Vec2::new(3.5, 3.5),
             Vec2::ONE,
             Resample::Bilinear,
@@ -316,13 +322,14 @@ mod tests {
         assert!((p - Vec2::new(10.8, 4.1)).length() < 1e-5);
         let far = position(
             s,
-            Vec2::ZERO,
+            || Vec2::ZERO,
             Vec2::splat(9.0),
             Vec2::ONE,
             Resample::CatmullRom,
         );
         assert_eq!(far, s + 0.5);
-        let near = position(s, Vec2::ZERO, Vec2::ONE, Vec2::ONE, Resample::Nearest);
+        let unasked = || unreachable!("nearest asked where it landed");
+        let near = position(s, unasked, Vec2::ONE, Vec2::ONE, Resample::Nearest);
         assert_eq!(near, s);
     }
 

@@ -18,10 +18,10 @@
 //! ([`WARPED`]) and writes only holes ([`CRACK`]), so it is
 //! order-independent.
 
-use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{CRACK, DisplayMap, EMPTY, Output, Pixel, WARPED};
 use glam::Vec2;
 
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
+use crate::output::{CRACK, DisplayMap, EMPTY, Output, Pixel, WARPED};
 use crate::passes::common::camera::{PassCamera, cell, pixel_center};
 use crate::passes::common::resample::{self, Resample, Source};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
@@ -85,10 +85,7 @@ pub fn resolve(
         };
         let center = pixel_center(t, width);
         let own = pixel_center(i, source.size.0);
-        let at = match how.filter {
-            Resample::Nearest => own,
-            _ => resample::position(own, landing(i), center, how.map.scale, how.filter),
-        };
+        let at = resample::position(own, || landing(i), center, how.map.scale, how.filter);
         let c = resample::resample(source, i, at, how.filter);
         Pixel {
             color: [c[0], c[1], c[2], 1.0],
