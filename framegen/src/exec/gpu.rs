@@ -22,7 +22,7 @@ use crate::passes::gffe::background::{GpuBackground, Texel as BgTexel};
 use crate::passes::gffe::bgfill::GpuBgFill;
 use crate::passes::gffe::history::{GpuHistory, GpuHistoryBuffers};
 use crate::passes::gffe::motion::GpuMotion;
-use crate::passes::gffe::warp::{GpuOutput, GpuSource, GpuWarp, Resolve};
+use crate::passes::gffe::warp::{GpuOutput, GpuSource, GpuWarp};
 use crate::passes::interp::reproject::GpuReproject;
 use crate::passes::interp::resolve::{GpuImage, GpuResolve};
 use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapshot};
@@ -662,15 +662,10 @@ impl Executor for GpuBackend {
                 next: &g.next,
                 size: (c.camera.width(), c.camera.height()),
             };
-            let how = Resolve {
-                map: job.map,
-                filter: job.resample,
-                size: (job.target.width(), job.target.height()),
-            };
             k.warp.encode_resolve(
                 p.ctx,
                 enc,
-                (&job.target, how),
+                (&job.target, job.map, job.resample),
                 source,
                 (&g.keys, &g.winners),
                 g.out(),

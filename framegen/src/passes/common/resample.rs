@@ -38,11 +38,11 @@ use glam::{Vec2, Vec4};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Resample {
     /// The winning source pixel's colour.
-    Nearest,
+    Nearest = 0,
     /// Bilinear on the winner's surface.
-    Bilinear,
+    Bilinear = 1,
     /// Clamped Catmull-Rom on the winner's surface.
-    CatmullRom,
+    CatmullRom = 2,
 }
 
 impl Resample {
@@ -58,7 +58,7 @@ impl Resample {
         }
     }
 
-    /// The kernels' code for the filter.
+    /// The kernels' code for the filter (`warp.wgsl`'s `RESAMPLE_*`).
     pub fn code(self) -> u32 {
         self as u32
     }

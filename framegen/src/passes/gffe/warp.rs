@@ -218,12 +218,20 @@ impl GpuWarp {
         }
     }
 
-    fn params(ctx: &Rec<'_>, target: &PassCamera, sizes: [u32; 4], how: Resolve) -> wgpu::Buffer {
+    /// The kernels' uniform: `resample` is the filter code and the source
+    /// height (`warp_resolve` only).
+    fn params(
+        ctx: &Rec<'_>,
+        target: &PassCamera,
+        sizes: [u32; 4],
+        map: DisplayMap,
+        resample: [u32; 2],
+    ) -> wgpu::Buffer {
         ctx.uniform(bytemuck::bytes_of(&Params {
             target: *target,
             sizes,
-            map: how.map.to_array(),
-            resample: [how.filter.code(), how.size.1, 0, 0],
+            map: map.to_array(),
+            resample: [resample[0], resample[1], 0, 0],
         }))
     }
 
@@ -238,40 +246,27 @@ impl GpuWarp {
         candidates: &wgpu::Buffer,
     ) {
         let sizes = [n, target.width(), target.height(), 0];
-        let how = Resolve {
-            map: DisplayMap::IDENTITY,
-            filter: Resample::Nearest,
-            size: (0, 0),
-        };
-        let params = Self::params(ctx, target, sizes, how);
+        let params = Self::params(ctx, target, sizes, DisplayMap::IDENTITY, [0, 0]);
         self.project
             .dispatch(ctx, encoder, &[&params, next, candidates], u64::from(n));
     }
 
-    /// Records `warp_resolve` and `warp_cracks` over the target pixels.
-    /// `source` is the rendered frame's colour and depth with its size
-    /// (`how.size` is replaced by it), `next` the positions at α the
-    /// candidates were projected from.
+    /// Records `warp_resolve` and `warp_cracks` over the target pixels, with
+    /// the map from rendered to displayed pixels and the colour filter.
+    /// `source` is the rendered frame's colour and depth with its size,
+    /// `next` the positions at α the candidates were projected from.
     pub fn encode_resolve(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        (target, how): (&PassCamera, Resolve),
+        (target, map, filter): (&PassCamera, DisplayMap, Resample),
         source: GpuSource<'_>,
         (keys, winners): (&wgpu::Buffer, &wgpu::Buffer),
         out: GpuOutput<'_>,
     ) {
         let (sw, sh) = source.size;
         let sizes = [0, target.width(), target.height(), sw];
-        let params = Self::params(
-            ctx,
-            target,
-            sizes,
-            Resolve {
-                size: (sw, sh),
-                ..how
-            },
-        );
+        let params = Self::params(ctx, target, sizes, map, [filter.code(), sh]);
         let pixels = u64::from(target.width()) * u64::from(target.height());
         self.resolve.dispatch(
             ctx,
