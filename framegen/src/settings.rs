@@ -38,9 +38,11 @@ pub struct Settings {
     /// The displayed size, when the stream's adaptive window keeps the
     /// rendered size (`KeepSize`); `None` derives it from the window.
     pub display_size: Option<(u32, u32)>,
-    /// How the forward warp (gffe, reproject) takes a winner's colour:
-    /// resampled at the sub-pixel position the target pixel maps back to
-    /// (`passes/common/resample.rs`), or the nearest pixel as in the seed.
+    /// How a generated pixel takes its colour from a rendered frame:
+    /// resampled at the sub-pixel position the pixel maps back to
+    /// (`passes/common/resample.rs`), or the nearest pixel as in the seeds'
+    /// forward warp (gffe, reproject). Interpolation's resolve reads both
+    /// frames with it.
     pub resample: Resample,
 }
 

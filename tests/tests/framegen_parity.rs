@@ -352,12 +352,17 @@ fn whole_pipeline_matches_on_opengl() {
 }
 
 fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
-    // Every method at its defaults, and the warp's other colour filters.
+    // Every method at its defaults, the warp's other colour filters, and
+    // interpolation's resolve with the bilinear one.
     let mut settings: Vec<Settings> = Method::ALL.map(Settings::for_method).to_vec();
-    for resample in [framegen::Resample::Nearest, framegen::Resample::Bilinear] {
+    for (method, resample) in [
+        (Method::Gffe, framegen::Resample::Nearest),
+        (Method::Gffe, framegen::Resample::Bilinear),
+        (Method::Interp, framegen::Resample::Bilinear),
+    ] {
         settings.push(Settings {
             resample,
-            ..Settings::for_method(Method::Gffe)
+            ..Settings::for_method(method)
         });
     }
     for scene in tests::HARD_CASES {

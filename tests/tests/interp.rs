@@ -42,10 +42,10 @@ fn alpha_zero_and_one_reproduce_the_previous_and_current_frames() {
                 at1.frame.color, fs[1].color,
                 "{scene}: α = 1 is the current frame"
             );
-            // α → 0: the previous frame's geometry, resampled from the
-            // current frame where visible in both (bilinear fetches soften
-            // aliased thin lines, so not bit-exact): much closer to the
-            // previous frame than the current frame is.
+            // α → 0: the previous frame's geometry, and its colour where
+            // a surface is visible in both frames (resampled at sub-pixel
+            // positions, so not bit-exact): much closer to the previous
+            // frame than the current frame is.
             let at0 = g.generate(1e-6).unwrap();
             let p0 = psnr(&at0.frame, &fs[0]);
             let pc = psnr(&fs[1], &fs[0]);

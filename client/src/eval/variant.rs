@@ -150,7 +150,7 @@ pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
             size,
         ));
     }
-    for method in [Method::Reproject, Method::Gffe] {
+    for method in [Method::Reproject, Method::Gffe, Method::Interp] {
         for filter in Resample::ALL {
             if filter == at(method).resample {
                 continue;

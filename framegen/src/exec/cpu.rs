@@ -113,10 +113,11 @@ fn ingesting(ingest: &mut Option<Ingest>) -> Result<&mut Ingest, FramegenError> 
 }
 
 /// A frame's colour and depth, as interpolation's resolve reads them.
-fn image(s: &FrameState) -> resolve::Image<'_> {
-    resolve::Image {
+fn image(s: &FrameState) -> Source<'_> {
+    Source {
         color: &s.frame.color,
         depth: &s.frame.depth,
+        size: (s.camera.width(), s.camera.height()),
     }
 }
 
@@ -370,7 +371,7 @@ impl Executor for CpuBackend {
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         let out = Self::output(&mut self.out)?;
         timed(&mut self.timings, Pass::Resolve, || {
-            resolve::resolve(out, image(cur), image(prev), job.alpha);
+            resolve::resolve(out, (image(cur), image(prev)), job.alpha, job.resample);
         });
         Ok(())
     }

@@ -741,14 +741,18 @@ impl Executor for GpuBackend {
                 "interpolation without a previous frame",
             ));
         }
-        let alpha = job.alpha;
+        let (alpha, filter) = (job.alpha, job.resample);
         self.record(Pass::Resolve, |p, enc| {
             let c = p.cur;
             let Some(prev) = p.prev else { return };
             let size = (c.camera.width(), c.camera.height());
-            p.kernels
-                .resolve
-                .encode(p.ctx, enc, size, alpha, c.image(), prev.image(), p.g.out());
+            p.kernels.resolve.encode(
+                p.ctx,
+                enc,
+                (size, alpha, filter),
+                (c.image(), prev.image()),
+                p.g.out(),
+            );
         })
     }
 

@@ -30,9 +30,15 @@
 //! surface; the filter's cost is paid at edges and texture).
 //!
 //! Filtering runs on linear HDR colour, as it arrives.
-//! `warp.wgsl` mirrors [`resample`] operation by operation.
+//! `resample.wgsl` ([`WGSL`]) mirrors [`resample`] operation by operation
+//! for the kernels that resample (the warp, interpolation's resolve).
 
 use glam::{Vec2, Vec4};
+
+/// The WGSL of [`resample`] and [`same_surface`], prefixed to the shaders
+/// that resample (each defines where its source image comes from; see the
+/// file's head).
+pub const WGSL: &str = include_str!("resample.wgsl");
 
 /// How a warped pixel takes its colour from the source frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -190,7 +190,7 @@ impl GpuWarp {
     /// Compiles the kernels.
     pub fn new(ctx: &GpuContext) -> Self {
         use Binding::*;
-        let src = include_str!("warp.wgsl");
+        let src = &format!("{}\n{}", resample::WGSL, include_str!("warp.wgsl"));
         Self {
             project: Kernel::new(
                 ctx,

@@ -11,7 +11,7 @@
 //! | 3 reproject | [`reproject::project`] + `crate::passes::common::splat` | depth-aware, exact |
 //! | 4 merge | [`reproject::merge`] | winner → motion, depth, written |
 //! | 5 pull / 6 push | [`crate::passes::common::pushpull`] | the same push-pull as GFFE's holes |
-//! | 7 resolve | [`resolve`] | written → current frame, unwritten → previous |
+//! | 7 resolve | [`resolve`] | written → both frames where visible in both, else current; unwritten → previous |
 //!
 //! Choices where the seed is ambiguous or wrong, each tested:
 //!
@@ -42,7 +42,12 @@
 //!   the pyramid's average motion (0 if nothing was written at all) and fetches the previous frame nearly in place:
 //!   the seed's tearing, but never a NaN or an out-of-bounds read (every
 //!   fetch is clamped to the image).
-//! * **Outputs.** Depth is the fetched frame's depth (nearest pixel); the
+//! * **Two-sided resolve.** The seed fetches every pixel from one frame,
+//!   so shading that changes between the frames jumps; a pixel whose
+//!   surface is visible in both frames blends them by α (see [`resolve`]),
+//!   with the warp's sharp resampling.
+//! * **Outputs.** Depth is the fetched frames' depth (blended by α where
+//!   both are fetched); the
 //!   motion vector points to the *previous* rendered frame (`α·m`, §3
 //!   convention); the mask says written ([`crate::output::WARPED`]) or
 //!   unwritten ([`crate::output::FILLED`]).

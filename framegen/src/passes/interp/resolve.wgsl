@@ -1,6 +1,8 @@
-// GeoMotionGen pass 7: fuse the current and previous frames. See `resolve.rs`.
+// GeoMotionGen pass 7, two-sided: fuse the current and previous frames.
+// See `resolve.rs`; the resampling is `resample.wgsl`'s.
 
 struct ResolveParams {
+    // width, height, the colour filter (`Resample::code`), 0.
     size: vec4<u32>,
     alpha: vec4<f32>,
 };
@@ -15,36 +17,40 @@ struct ResolveParams {
 @group(0) @binding(7) var<storage, read_write> out_motion: array<vec2<f32>>;
 @group(0) @binding(8) var<storage, read_write> out_mask: array<u32>;
 
-fn clamped(p: vec2<f32>) -> u32 {
-    let x = min(u32(max(p.x, 0.0)), rp.size.x - 1u);
-    let y = min(u32(max(p.y, 0.0)), rp.size.y - 1u);
-    return y * rp.size.x + x;
+// Which frame `resample.wgsl` reads: the current one unless set.
+var<private> from_previous: bool;
+
+fn rs_color(k: u32) -> vec4<f32> {
+    if from_previous {
+        return prev_color[k];
+    }
+    return cur_color[k];
 }
 
-fn fetch(current: bool, p: vec2<f32>) -> vec4<f32> {
-    let q = p - 0.5;
-    let base = floor(q);
-    let f = q - base;
-    let i00 = clamped(base);
-    let i10 = clamped(base + vec2<f32>(1.0, 0.0));
-    let i01 = clamped(base + vec2<f32>(0.0, 1.0));
-    let i11 = clamped(base + vec2<f32>(1.0, 1.0));
-    var c00: vec4<f32>;
-    var c10: vec4<f32>;
-    var c01: vec4<f32>;
-    var c11: vec4<f32>;
-    if current {
-        c00 = cur_color[i00];
-        c10 = cur_color[i10];
-        c01 = cur_color[i01];
-        c11 = cur_color[i11];
-    } else {
-        c00 = prev_color[i00];
-        c10 = prev_color[i10];
-        c01 = prev_color[i01];
-        c11 = prev_color[i11];
+fn rs_depth(k: u32) -> f32 {
+    if from_previous {
+        return prev_depth[k];
     }
-    return (c00 * (1.0 - f.x) + c10 * f.x) * (1.0 - f.y) + (c01 * (1.0 - f.x) + c11 * f.x) * f.y;
+    return cur_depth[k];
+}
+
+fn rs_size() -> vec2<i32> {
+    return vec2<i32>(rp.size.xy);
+}
+
+// `resolve.rs` `take`: colour (w = depth) of one side at `at`.
+fn take(previous: bool, at: vec2<f32>) -> vec4<f32> {
+    from_previous = previous;
+    let own = rs_clamp_index(at);
+    return vec4<f32>(resample_at(own, at, rp.size.z), rs_depth(own));
+}
+
+// `resolve.rs` `mix`.
+fn mix_depth(a: f32, b: f32, alpha: f32) -> f32 {
+    if bitcast<u32>(a) == bitcast<u32>(b) {
+        return a;
+    }
+    return a * (1.0 - alpha) + b * alpha;
 }
 
 @compute @workgroup_size(256)
@@ -56,18 +62,31 @@ fn interp_resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups
     }
     let alpha = rp.alpha.x;
     let center = vec2<f32>(f32(t % w) + 0.5, f32(t / w) + 0.5);
-    let m = out_motion[t] * vec2<f32>(f32(w), f32(rp.size.y));
-    let written = out_mask[t] == WARPED_MASK;
-    var at = center + m * alpha;
-    if written {
-        at = center - m * (1.0 - alpha);
-    }
-    let c = fetch(written, at);
-    out_color[t] = vec4<f32>(c.xyz, 1.0);
-    if written {
-        out_depth[t] = cur_depth[clamped(at)];
+    let size = vec2<f32>(f32(w), f32(rp.size.y));
+    let m = out_motion[t] * size;
+    let before = center + m * alpha;
+    var r: vec4<f32>;
+    if out_mask[t] != WARPED_MASK {
+        r = take(true, before);
     } else {
-        out_depth[t] = prev_depth[clamped(at)];
+        // `resolve.rs` `fetch`.
+        let now = center - m * (1.0 - alpha);
+        var both = false;
+        if all(before >= vec2<f32>(0.0)) && all(before < size) {
+            from_previous = false;
+            let d_now = rs_depth(rs_clamp_index(now));
+            from_previous = true;
+            let d_before = rs_depth(rs_clamp_index(before));
+            both = same_surface(d_before, d_now);
+        }
+        let c = take(false, now);
+        r = c;
+        if both {
+            let p = take(true, before);
+            r = vec4<f32>(p.xyz * (1.0 - alpha) + c.xyz * alpha, mix_depth(p.w, c.w, alpha));
+        }
     }
+    out_color[t] = vec4<f32>(r.xyz, 1.0);
+    out_depth[t] = r.w;
     out_motion[t] = m * alpha;
 }
