@@ -200,6 +200,11 @@ struct EvalArgs {
     /// ...at this many frames each.
     #[arg(long, default_value_t = 2)]
     heatmap_frames: usize,
+    /// Also write every scored generated frame under DIR/<scene>/<variant>/
+    /// as EXR (colour, depth, motion), JSON metadata and the scored PNG,
+    /// named by the ground-truth frame it stands for.
+    #[arg(long, value_name = "DIR")]
+    save_frames: Option<PathBuf>,
 }
 
 /// Options of `connect`.
@@ -293,6 +298,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         heatmap_inputs: args.heatmap_scenes,
         heatmap_frames: args.heatmap_frames,
         out: args.out.clone(),
+        save_frames: args.save_frames,
         command: std::env::args()
             .enumerate()
             .map(|(i, a)| if i == 0 { "client".into() } else { a })

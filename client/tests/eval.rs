@@ -27,6 +27,7 @@ fn config(inputs: Vec<Input>, out: &std::path::Path) -> EvalConfig {
         heatmap_inputs: 1,
         heatmap_frames: 1,
         out: out.to_path_buf(),
+        save_frames: None,
         command: "client eval (test)".into(),
         progress: false,
     }
@@ -211,4 +212,52 @@ fn pass_times_from_timestamps_are_labelled() {
     );
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("GPU time from timestamp queries"));
+}
+
+/// `--save-frames`: every scored generated frame is on disk, named by the
+/// truth frame it stands for; the EXR reads back as a frame whose display
+/// encoding is exactly the saved PNG, with the metadata beside it.
+#[test]
+fn saved_frames_are_the_scored_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let saved = dir.path().join("frames");
+    let mut c = config(vec![Input::Scene("builtin:crossing".into())], dir.path());
+    c.backends = vec![BackendKind::Cpu];
+    c.only = vec!["gffe".into(), "interp".into()];
+    c.heatmap_inputs = 0;
+    c.save_frames = Some(saved.clone());
+    let report = run(&c).unwrap();
+    for row in &report.scenes[0].rows {
+        let vdir = client::eval::save::dir(&saved, "crossing", &row.label);
+        let mut exrs: Vec<_> = std::fs::read_dir(&vdir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "exr"))
+            .collect();
+        exrs.sort();
+        assert_eq!(exrs.len(), row.quality.frames, "{}", row.label);
+        let mut indices = Vec::new();
+        for exr in &exrs {
+            let index: u64 = exr.file_stem().unwrap().to_str().unwrap().parse().unwrap();
+            let [_, json, png] = client::eval::save::paths(&vdir, index);
+            let meta: protocol::FrameMeta =
+                serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+            assert_eq!(meta.size, SIZE);
+            let mut frame = protocol::Frame::empty(meta);
+            protocol::dump::read_exr(exr, &mut frame).unwrap();
+            assert!(frame.depth.iter().all(|d| *d > 0.0));
+            assert!(frame.motion.iter().flatten().all(|m| m.is_finite()));
+            let encoded = framegen::display_encode(SIZE.width, SIZE.height, &frame.color).unwrap();
+            let png = image::open(&png).unwrap().to_rgb8();
+            assert_eq!(png.as_raw(), &encoded.to_rgb8(), "{}", exr.display());
+            indices.push(index);
+        }
+        // Every one stands for a skipped frame: at n = 1 from the even
+        // start, the odd indices, every other one in turn.
+        assert!(
+            indices.windows(2).all(|p| p[1] == p[0] + 2) && indices[0] % 2 == 1,
+            "{}: {indices:?}",
+            row.label
+        );
+    }
 }

@@ -15,12 +15,14 @@
 //! * [`measure`]: PSNR, SSIM, ꟻLIP, regions;
 //! * [`timing`]: per-pass and total milliseconds, the copy floor;
 //! * [`report`]: Pareto fronts, `report.md`, `report.json`;
-//! * [`plot`] and [`heatmap`]: the images.
+//! * [`plot`] and [`heatmap`]: the images;
+//! * [`save`]: the generated frames themselves (`--save-frames`).
 
 pub mod heatmap;
 pub mod measure;
 pub mod plot;
 pub mod report;
+pub mod save;
 pub mod sequence;
 pub mod timing;
 pub mod variant;
@@ -95,6 +97,8 @@ pub struct EvalConfig {
     pub heatmap_frames: usize,
     /// Output directory.
     pub out: PathBuf,
+    /// Where to write every scored generated frame ([`save`]), if anywhere.
+    pub save_frames: Option<PathBuf>,
     /// The command line, quoted in the report.
     pub command: String,
     /// Show progress bars.
@@ -174,7 +178,18 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                 && window == WindowMode::Off
                 && gsize == size)
                 .then(|| heatmap_frames(seq.len() as usize, config.warmup, config.heatmap_frames));
-            let out = run_group(&mut seq, &vs, ctx.as_ref(), config, heat.as_deref(), &bar)?;
+            let save = config
+                .save_frames
+                .as_deref()
+                .map(|root| (root, name.as_str()));
+            let out = run_group(
+                &mut seq,
+                &vs,
+                ctx.as_ref(),
+                config,
+                (heat.as_deref(), save),
+                &bar,
+            )?;
             bar.finish_and_clear();
             rows.extend(out.rows);
             for (truth_index, captures) in out.heat {
@@ -253,7 +268,7 @@ fn run_group(
     variants: &[Variant],
     ctx: Option<&Arc<GpuContext>>,
     config: &EvalConfig,
-    heat_frames: Option<&[usize]>,
+    (heat_frames, save): (Option<&[usize]>, Option<(&std::path::Path, &str)>),
     bar: &ProgressBar,
 ) -> anyhow::Result<GroupOutput> {
     let mut runs = variants
@@ -382,6 +397,10 @@ fn run_group(
                         t
                     }
                 };
+                if let Some((root, scene)) = save {
+                    let dir = save::dir(root, scene, &run.variant.label);
+                    save::write(&dir, truth.meta.index, &g.frame, &test)?;
+                }
                 let regions = measure::regions(g, truth);
                 let sc = score(&test, &truth_image, &regions)?;
                 run.quality.add(&sc, g);

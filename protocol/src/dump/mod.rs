@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-pub use exr_io::{PANIC_DETAIL, channel_names};
+pub use exr_io::{PANIC_DETAIL, channel_names, read_exr, write_exr};
 pub(crate) use exr_io::{PlaneOut, mask_bytes, read_planes, rgb_pixel, write_planes};
 
 use crate::frame::{Frame, FrameMeta, FrameSize};
