@@ -69,10 +69,10 @@ fn methods_on_a_scene_and_on_its_dump() {
     assert_eq!(json["scenes"].as_array().unwrap().len(), 2);
     assert_eq!(report.heatmaps.len(), 1);
     let heat = image::open(out.join(&report.heatmaps[0])).unwrap();
-    // Truth + 4 methods across, image and error map down.
+    // Truth + 4 methods + the oracle across, image and error map down.
     assert_eq!(
         (heat.width(), heat.height()),
-        (5 * SIZE.width, 2 * SIZE.height)
+        (6 * SIZE.width, 2 * SIZE.height)
     );
     if std::path::Path::new("/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf").exists() {
         assert!(out.join("plots/crossing.png").exists());
@@ -80,7 +80,9 @@ fn methods_on_a_scene_and_on_its_dump() {
     }
 
     let [scene, dumped] = [&report.scenes[0], &report.scenes[1]];
-    assert_eq!(scene.rows.len(), 4);
+    // The four methods and the oracle-motion reference beside gffe.
+    assert_eq!(scene.rows.len(), 5);
+    assert_eq!(scene.rows[3].label, client::eval::variant::ORACLE);
     for row in &scene.rows {
         let q = &row.quality;
         // 8 fed frames, 2 warm up: 6 generated frames compared.
@@ -89,6 +91,15 @@ fn methods_on_a_scene_and_on_its_dump() {
         assert!((0.0..=1.0).contains(&q.ssim) && (0.0..=1.0).contains(&q.flip));
         let shares: f64 = q.regions.iter().map(|r| r.share).sum();
         assert!((shares - 1.0).abs() < 1e-9);
+        let d = dumped.rows.iter().find(|r| r.label == row.label).unwrap();
+        // The same frames from a dump score the same.
+        assert!((d.quality.psnr - q.psnr).abs() < 1e-9, "{}", row.label);
+        assert!((d.quality.flip - q.flip).abs() < 1e-9, "{}", row.label);
+        if row.label == client::eval::variant::ORACLE {
+            // Not a generator: untimed, on no front.
+            assert!(row.timing.is_empty() && row.front_all.is_empty());
+            continue;
+        }
         for t in &row.timing {
             assert!(t.per_generated_ms > 0.0 && !t.passes.is_empty(), "{t:?}");
         }
@@ -107,13 +118,13 @@ fn methods_on_a_scene_and_on_its_dump() {
         assert_eq!(d.render.unwrap().origin, RenderOrigin::Recorded);
         // The backends agree (parity tests: 0 differing pixels here).
         assert!(row.backend_agreement_psnr.unwrap() > 60.0, "{row:?}");
-        // The same frames from a dump score the same.
-        let d = dumped.rows.iter().find(|r| r.label == row.label).unwrap();
-        assert!((d.quality.psnr - q.psnr).abs() < 1e-9, "{}", row.label);
-        assert!((d.quality.flip - q.flip).abs() < 1e-9, "{}", row.label);
     }
     let by = |m: &str| scene.rows.iter().find(|r| r.label == m).unwrap();
     let (repeat, gffe, interp) = (by("repeat"), by("gffe"), by("interp"));
+    // The true geometry of the skipped frame does better than gffe's
+    // estimate of it.
+    let oracle = by(client::eval::variant::ORACLE);
+    assert!(oracle.quality.flip < gffe.quality.flip, "{oracle:?}");
     for r in [repeat, by("reproject"), gffe, interp] {
         eprintln!(
             "{}: {:.2} dB, FLIP {:.4}, regions {:?}",

@@ -75,27 +75,8 @@ mod tests {
 
     #[test]
     fn a_cut_in_a_skipped_frame_flags_the_next_kept_one() {
-        use protocol::{Camera, FrameMeta, FrameSize, Pose, Projection};
-        let size = FrameSize::new(2, 1);
-        let mut frames: Vec<Frame> = (0..5)
-            .map(|i| Frame {
-                meta: FrameMeta {
-                    index: i,
-                    time: i as f64 / 60.0,
-                    camera: Camera::new(
-                        Pose::new(glam::DVec3::ZERO, glam::DQuat::IDENTITY),
-                        Projection::perspective(1.0, 2.0, 0.1, f64::INFINITY),
-                    ),
-                    size,
-                    host_processing: std::time::Duration::ZERO,
-                    cut: false,
-                },
-                color: vec![[half::f16::ZERO; 4]; 2],
-                depth: vec![1.0; 2],
-                motion: vec![[0.0; 2]; 2],
-                extras: vec![],
-            })
-            .collect();
+        let size = protocol::FrameSize::new(2, 1);
+        let mut frames: Vec<Frame> = (0..5).map(|i| crate::testutil::frame(i, size)).collect();
         frames[3].meta.cut = true;
         let kept = decimate(&frames, 2);
         assert_eq!(

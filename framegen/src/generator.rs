@@ -424,7 +424,7 @@ fn displayed_region(meta: &FrameMeta, display_size: Option<(u32, u32)>) -> ((u32
 }
 
 /// Turns the passes' output into a [`Generated`].
-fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
+pub(crate) fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
     use rayon::prelude::*;
     let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
     // In blocks: sanitised on the stack, then converted with the CPU's f16

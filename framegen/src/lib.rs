@@ -18,12 +18,15 @@ pub mod input;
 pub mod memory;
 pub mod method;
 pub mod metrics;
+pub mod oracle;
 pub mod output;
 mod par;
 pub mod passes;
 pub mod pipeline;
 pub mod schedule;
 pub mod settings;
+#[cfg(test)]
+mod testutil;
 
 /// The fixed display transform lives in `protocol` (it is part of the data
 /// contract); re-exported here for the metrics' users.
@@ -60,6 +63,9 @@ pub enum FramegenError {
     /// The frame's buffers do not match its metadata.
     #[error("invalid frame: {0}")]
     Frame(#[from] protocol::ValidationError),
+    /// Two frames that must share a size do not.
+    #[error("frames of different sizes: {0}x{1} and {2}x{3}")]
+    Sizes(u32, u32, u32, u32),
     /// A frame was asked for before any rendered frame arrived.
     #[error("no rendered frame yet")]
     NoFrame,

@@ -274,8 +274,9 @@ fn run_group(
     let mut runs = variants
         .iter()
         .map(|v| {
-            let generators = config
-                .backends
+            // The oracle runs no generator (and is not timed).
+            let backends: &[BackendKind] = if v.oracle { &[] } else { &config.backends };
+            let generators = backends
                 .iter()
                 .map(|&b| {
                     let g = match (b, ctx) {
@@ -294,7 +295,7 @@ fn run_group(
                 .collect::<anyhow::Result<Vec<_>>>()?;
             Ok(Run {
                 variant: v,
-                timing: config.backends.iter().map(|&b| TimingAcc::new(b)).collect(),
+                timing: backends.iter().map(|&b| TimingAcc::new(b)).collect(),
                 generators,
                 quality: Accumulator::default(),
                 agreement: None,
@@ -338,6 +339,26 @@ fn run_group(
             // the newest fed one (interpolation: the interval before it).
             let behind = run.variant.settings.method.descriptor().held_back as usize * s;
             let mut outputs = Vec::new();
+            if run.variant.oracle && scored {
+                // The skipped frames with their motion composed back to the
+                // fed one (`fed` is the plain view: window off).
+                let settings = &run.variant.settings;
+                let generated = (1..s)
+                    .map(|j| {
+                        let between: Vec<&Frame> =
+                            (m + 1..m + j).map(|k| at(k).truth.as_ref()).collect();
+                        let truth = framegen::decimate::kept(&at(m + j).truth, &between);
+                        let alpha = j as f64 / s as f64;
+                        framegen::oracle::backward_warp(
+                            &at(m).truth,
+                            &truth,
+                            alpha,
+                            (settings.resample, settings.pushpull_levels),
+                        )
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                outputs.push(generated);
+            }
             for ((b, g), t) in run.generators.iter_mut().zip(&mut run.timing) {
                 // wgpu alternates: plain intervals give the true totals (one
                 // submission per push and per generation), profiled ones in

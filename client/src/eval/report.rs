@@ -401,16 +401,21 @@ impl Report {
                     .count();
                 let _ = write!(md, " {on} / {} |", same.len());
             }
-            let mean = |f: &dyn Fn(&Row) -> Option<f64>| {
+            // The mean over the scenes that have the value ("—" if none:
+            // the untimed oracle).
+            let mean = |f: &dyn Fn(&Row) -> Option<f64>, digits: usize, unit: &str| {
                 let v: Vec<f64> = same.iter().filter_map(|r| f(r)).collect();
-                v.iter().sum::<f64>() / v.len().max(1) as f64
+                if v.is_empty() {
+                    return "—".to_string();
+                }
+                format!("{:.digits$}{unit}", v.iter().sum::<f64>() / v.len() as f64)
             };
-            let _ = write!(md, " {:.4} |", mean(&|r| Some(r.quality.flip)));
+            let _ = write!(md, " {} |", mean(&|r| Some(r.quality.flip), 4, ""));
             for &b in &self.backends {
-                let _ = write!(md, " {:.2} |", mean(&|r| r.ms(b)));
+                let _ = write!(md, " {} |", mean(&|r| r.ms(b), 2, ""));
             }
             for &b in &self.backends {
-                let _ = write!(md, " {:.2}× |", mean(&|r| r.render_multiple(b)));
+                let _ = write!(md, " {} |", mean(&|r| r.render_multiple(b), 2, "×"));
             }
             let _ = writeln!(md);
         }

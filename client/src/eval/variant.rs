@@ -48,6 +48,9 @@ impl Axis {
     }
 }
 
+/// The label of the oracle-motion row.
+pub const ORACLE: &str = "gffe oracle-motion";
+
 /// Which variants to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Sweep {
@@ -71,6 +74,11 @@ pub struct Variant {
     pub window: WindowMode,
     /// The displayed size.
     pub size: FrameSize,
+    /// Not a generator: the oracle-motion reference
+    /// ([`framegen::oracle`]), the skipped frame's true geometry applied to
+    /// the rendered frame with `settings`' filter and pyramid. Untimed
+    /// (it is not realisable), so on no Pareto front.
+    pub oracle: bool,
 }
 
 impl Variant {
@@ -81,6 +89,7 @@ impl Variant {
             settings,
             window: WindowMode::Off,
             size,
+            oracle: false,
         }
     }
 
@@ -113,6 +122,15 @@ pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
         .into_iter()
         .map(|m| Variant::new(Axis::Method, m.name().into(), at(m), size))
         .collect();
+    // Beside gffe: the same with the skipped frame's true geometry (one row
+    // serves both extrapolators: with true geometry, gffe and reproject
+    // make the same frame).
+    let gffe_at = out.iter().position(|v| v.settings.method == Method::Gffe);
+    let oracle = Variant {
+        oracle: true,
+        ..Variant::new(Axis::Method, ORACLE.into(), at(Method::Gffe), size)
+    };
+    out.insert(gffe_at.map_or(out.len(), |i| i + 1), oracle);
     if kind == Sweep::Methods {
         return out;
     }
@@ -226,7 +244,11 @@ mod tests {
         for v in &all {
             v.settings.validate().unwrap();
         }
-        assert_eq!(sweep(Sweep::Methods, size, true).len(), 4);
+        // The four methods and the oracle beside gffe.
+        let methods = sweep(Sweep::Methods, size, true);
+        let labels: Vec<&str> = methods.iter().map(|v| v.label.as_str()).collect();
+        assert_eq!(labels, ["repeat", "reproject", "gffe", ORACLE, "interp"]);
+        assert_eq!(methods.iter().filter(|v| v.oracle).count(), 1);
         assert!(
             !sweep(Sweep::Full, size, false)
                 .iter()
