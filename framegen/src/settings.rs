@@ -69,10 +69,12 @@ impl Settings {
     /// largest accepted `pushpull_levels`, capped per frame.
     pub const FULL_PYRAMID: u32 = 16;
 
-    /// Settings for `method` with every other value at its default.
+    /// Settings for `method` with every other value at its default (the
+    /// colour filter is the method's own, [`crate::Descriptor::resample`]).
     pub fn for_method(method: Method) -> Self {
         Self {
             method,
+            resample: method.descriptor().resample,
             ..Self::default()
         }
     }

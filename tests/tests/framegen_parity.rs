@@ -353,12 +353,12 @@ fn whole_pipeline_matches_on_opengl() {
 
 fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
     // Every method at its defaults, the warp's other colour filters, and
-    // interpolation's resolve with the bilinear one.
+    // interpolation's resolve with Catmull-Rom.
     let mut settings: Vec<Settings> = Method::ALL.map(Settings::for_method).to_vec();
     for (method, resample) in [
         (Method::Gffe, framegen::Resample::Nearest),
         (Method::Gffe, framegen::Resample::Bilinear),
-        (Method::Interp, framegen::Resample::Bilinear),
+        (Method::Interp, framegen::Resample::CatmullRom),
     ] {
         settings.push(Settings {
             resample,

@@ -40,7 +40,7 @@ impl Axis {
             Axis::Levels => "background levels L (gffe)",
             Axis::Pyramid => "push-pull pyramid depth",
             Axis::Epsilon => "static threshold ε (gffe)",
-            Axis::Resample => "warp colour filter (gffe, reproject)",
+            Axis::Resample => "colour filter (gffe, reproject, interp)",
             Axis::Window => "adaptive window",
             Axis::N => "generated frames per rendered frame n",
             Axis::Resolution => "resolution",
