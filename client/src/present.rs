@@ -179,20 +179,23 @@ pub async fn run_headless(
         }
         let vsync = di * k as u32;
         tokio::time::sleep_until((start + vsync).into()).await;
-        // Everything that arrived since the last vsync; only the newest is
-        // generated from (the scheduler counts the others as superseded).
+        // Everything that arrived since the last vsync, in stream order;
+        // only the newest is generated from (the scheduler counts the
+        // others as superseded), but every one is pushed: a frame's motion
+        // points to the one before it, and a frame left out is a gap in
+        // the generator's history.
         let mut arrived = Vec::new();
         while let Ok(frame) = session.frames.try_recv() {
             arrived.push((frame, clock()));
         }
+        arrived.sort_by_key(|(f, _)| f.meta.index);
         received += arrived.len() as u64;
         // Extrapolation generates from the newest frame at once;
-        // interpolation pushes a pair when a slot between them comes up.
-        if let Some((newest, _)) = arrived.last().filter(|_| !lazy) {
-            let t = Instant::now();
-            tokio::task::block_in_place(|| generator.push(newest))?;
-            ingest.push(t.elapsed().as_secs_f64() * 1e3);
-            pushed = Some(newest.meta.index);
+        // interpolation pushes up to the pair when a slot between them
+        // comes up.
+        if !lazy {
+            let due: Vec<&Frame> = arrived.iter().map(|(f, _)| f).collect();
+            push_in_order(&mut generator, due, &mut pushed, &mut ingest)?;
         }
         let ready_at = clock();
         for (frame, received_at) in arrived {
@@ -210,17 +213,10 @@ pub async fn run_headless(
         }
         if let Some(slot) = scheduler.vsync(vsync) {
             if let (SlotKind::Interpolated, Some(next)) = (slot.kind, slot.next) {
-                for id in [slot.source.id, next.id] {
-                    if pushed.is_some_and(|p| p >= id) {
-                        continue;
-                    }
-                    if let Some(f) = kept.iter().find(|f| f.meta.index == id) {
-                        let t = Instant::now();
-                        tokio::task::block_in_place(|| generator.push(f))?;
-                        ingest.push(t.elapsed().as_secs_f64() * 1e3);
-                        pushed = Some(id);
-                    }
-                }
+                let mut due: Vec<&Frame> =
+                    kept.iter().filter(|f| f.meta.index <= next.id).collect();
+                due.sort_by_key(|f| f.meta.index);
+                push_in_order(&mut generator, due, &mut pushed, &mut ingest)?;
             }
             let (image, ready_at) = produce(&slot, &mut generator, &kept, &mut generation, start)?;
             if let (Some(dir), Some(image)) = (&config.png_dir, &image) {
@@ -273,6 +269,27 @@ pub async fn run_headless(
         summary,
         records: accounting.records().to_vec(),
     })
+}
+
+/// Pushes the frames of `due` (in stream order) that come after the last
+/// pushed one; one that arrived after a newer one was pushed can no longer
+/// join the history and is left out. Records each push's time.
+fn push_in_order(
+    generator: &mut FrameGenerator,
+    due: Vec<&Frame>,
+    pushed: &mut Option<u64>,
+    ingest: &mut Vec<f64>,
+) -> anyhow::Result<()> {
+    for f in due {
+        if pushed.is_some_and(|p| f.meta.index <= p) {
+            continue;
+        }
+        let t = Instant::now();
+        tokio::task::block_in_place(|| generator.push(f))?;
+        ingest.push(t.elapsed().as_secs_f64() * 1e3);
+        *pushed = Some(f.meta.index);
+    }
+    Ok(())
 }
 
 /// The image of a slot and when it was ready (the source frame's ready

@@ -37,8 +37,14 @@ pub fn compose(newer: &[[f32; 2]], older: &[[f32; 2]], width: u32, height: u32) 
 /// motion composed back through them, and a cut among them carried over
 /// (the chain crosses it; the lower-rate renderer would have flagged it).
 /// The chain stops at a frame of another size (no correspondence exists).
-pub fn kept(frame: &Frame, skipped: &[&Frame]) -> Frame {
+///
+/// It is numbered as that renderer numbers its frames, `index / step`:
+/// kept frames `step` display frames apart count up by one, so the
+/// generator takes them as consecutive (an index gap means a frame that
+/// never arrived, `FrameGenerator::push`).
+pub fn kept(frame: &Frame, skipped: &[&Frame], step: usize) -> Frame {
     let mut f = frame.clone();
+    f.meta.index = frame.meta.index / step.max(1) as u64;
     f.meta.cut |= skipped.iter().any(|g| g.meta.cut);
     for older in skipped.iter().rev() {
         if older.meta.size != f.meta.size {
@@ -64,7 +70,7 @@ pub fn decimate(frames: &[Frame], step: usize) -> Vec<Frame> {
         .step_by(step)
         .map(|(k, frame)| {
             let skipped: Vec<&Frame> = frames[k.saturating_sub(step - 1)..k].iter().collect();
-            kept(frame, &skipped)
+            kept(frame, &skipped, step)
         })
         .collect()
 }
@@ -82,6 +88,11 @@ mod tests {
         assert_eq!(
             kept.iter().map(|f| f.meta.cut).collect::<Vec<_>>(),
             [false, false, true]
+        );
+        // Numbered as the lower-rate renderer numbers them: consecutive.
+        assert_eq!(
+            kept.iter().map(|f| f.meta.index).collect::<Vec<_>>(),
+            [0, 1, 2]
         );
     }
 

@@ -110,10 +110,32 @@ pub enum PushOutcome {
 #[derive(Clone, Debug)]
 struct Current {
     meta: FrameMeta,
-    prev_pose: Option<Pose>,
-    prev_time: Option<f64>,
+    /// The rendered frame before it, when the history continues.
+    prev: Option<Previous>,
     display: (u32, u32),
     crop: Crop,
+}
+
+/// What eq. 2 needs of the rendered frame before the current one.
+#[derive(Clone, Copy, Debug)]
+struct Previous {
+    pose: Pose,
+    time: f64,
+    /// Stream frames between it and the current one: 1, or more after a
+    /// gap (frames that never arrived).
+    steps: u64,
+}
+
+impl Previous {
+    /// The render interval the stream ran at: the time between the two
+    /// frames per stream frame (0 if time stood still).
+    fn interval(&self, now: f64) -> f64 {
+        if now > self.time {
+            (now - self.time) / self.steps as f64
+        } else {
+            0.0
+        }
+    }
 }
 
 /// The frame generator.
@@ -228,6 +250,7 @@ impl FrameGenerator {
             Some(c) if meta.time == c.meta.time && meta.camera.pose == c.meta.camera.pose => {
                 return Ok(PushOutcome::Duplicate);
             }
+            Some(c) if meta.index <= c.meta.index => Some("index did not increase"),
             Some(_) => None,
         };
         let prepared = Arc::new(prepare(frame));
@@ -247,19 +270,33 @@ impl FrameGenerator {
         let mut plan = IngestPlan {
             camera,
             prev: None,
+            follows: false,
             k: self.settings.effective_history(),
             epsilon: self.settings.static_epsilon,
             levels,
             tolerance: self.settings.depth_tolerance,
         };
-        let (prev_pose, prev_time) = match (&self.current, restart) {
+        let mut prev = match (&self.current, restart) {
             (Some(c), None) => {
                 plan.prev = Some(PassCamera::new(&c.meta.camera, c.meta.size, origin));
-                (Some(c.meta.camera.pose), Some(c.meta.time))
+                let steps = meta.index - c.meta.index;
+                // After a gap the motion vectors point to a frame that never
+                // arrived: the history restarts (every pixel static, no
+                // trajectory) while the background, held as positions,
+                // carries over through the cameras alone.
+                plan.follows = steps == 1;
+                if !plan.follows {
+                    tracing::debug!(frame = meta.index, missing = steps - 1, "frame gap");
+                }
+                Some(Previous {
+                    pose: c.meta.camera.pose,
+                    time: c.meta.time,
+                    steps,
+                })
             }
             _ => {
                 self.backend.reset();
-                (None, None)
+                None
             }
         };
         let mut outcome = match restart {
@@ -267,8 +304,6 @@ impl FrameGenerator {
             None => PushOutcome::Continued { dynamic: 0 },
         };
         let dynamic = self.backend.ingest(&prepared, &plan)?;
-        let mut prev_pose = prev_pose;
-        let mut prev_time = prev_time;
         if plan.prev.is_some() {
             let fraction = dynamic as f32 / prepared.valid.max(1) as f32;
             // Every method that tracks (all but repeat) detects cuts: an
@@ -286,16 +321,14 @@ impl FrameGenerator {
                 outcome = PushOutcome::Restarted {
                     reason: "detected cut (most pixels failed the static test)",
                 };
-                prev_pose = None;
-                prev_time = None;
+                prev = None;
             } else {
                 outcome = PushOutcome::Continued { dynamic };
             }
         }
         self.current = Some(Current {
             meta: *meta,
-            prev_pose,
-            prev_time,
+            prev,
             display,
             crop,
         });
@@ -332,8 +365,12 @@ impl FrameGenerator {
         // linearly, the rotation by slerp).
         let along = method.along(alpha);
         let pose = match source {
-            CameraSource::Extrapolated => match &cur.prev_pose {
-                Some(prev) => Pose::extrapolate(prev, &cur.meta.camera.pose, along),
+            // α counts render intervals; after a gap the last step spans
+            // several.
+            CameraSource::Extrapolated => match &cur.prev {
+                Some(prev) => {
+                    Pose::extrapolate(&prev.pose, &cur.meta.camera.pose, along / prev.steps as f64)
+                }
                 None => cur.meta.camera.pose,
             },
             CameraSource::Given(pose) => {
@@ -382,10 +419,7 @@ impl FrameGenerator {
             crop,
             resample: self.settings.resample,
         };
-        let interval = match cur.prev_time {
-            Some(t) if cur.meta.time > t => cur.meta.time - t,
-            _ => 0.0,
-        };
+        let interval = cur.prev.map_or(0.0, |p| p.interval(cur.meta.time));
         let meta = FrameMeta {
             index: cur.meta.index,
             time: cur.meta.time + along * interval,

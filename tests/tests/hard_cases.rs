@@ -258,6 +258,8 @@ fn camera_cuts() {
                 }
                 let mut cut = after[0].clone();
                 cut.meta.cut = flagged;
+                // The next frame of the same stream.
+                cut.meta.index = before.last().unwrap().meta.index + 1;
                 cut.meta.time = before.last().unwrap().meta.time + 1.0 / 30.0;
                 // Same lens: only the content tells (a projection change
                 // restarts by itself).

@@ -331,7 +331,7 @@ fn run_group(
                     } else {
                         Vec::new()
                     };
-                    Arc::new(framegen::decimate::kept(&at(m).fed, &skipped))
+                    Arc::new(framegen::decimate::kept(&at(m).fed, &skipped, s))
                 })
                 .clone();
             let scored = m / s >= config.warmup.max(1);
@@ -347,7 +347,7 @@ fn run_group(
                     .map(|j| {
                         let between: Vec<&Frame> =
                             (m + 1..m + j).map(|k| at(k).truth.as_ref()).collect();
-                        let truth = framegen::decimate::kept(&at(m + j).truth, &between);
+                        let truth = framegen::decimate::kept(&at(m + j).truth, &between, 1);
                         let alpha = j as f64 / s as f64;
                         framegen::oracle::backward_warp(
                             &at(m).truth,

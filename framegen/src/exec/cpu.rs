@@ -40,14 +40,19 @@ struct Ingest {
     /// The frame before the previous one, no longer needed: the passes
     /// write into its buffers instead of allocating and clearing new ones.
     spare: Option<FrameState>,
+    /// Whether the frame's motion points to `prev` (no gap between them).
+    follows: bool,
 }
 
 /// The CPU reference backend.
 #[derive(Debug, Default)]
 pub struct CpuBackend {
     current: Option<FrameState>,
-    /// The frame before `current` (interpolation's α = 0).
+    /// The frame before `current` (interpolation's α = 0 when `paired`).
     previous: Option<FrameState>,
+    /// Whether `current`'s motion points to `previous` (no frame between
+    /// them went missing).
+    paired: bool,
     timings: Vec<PassTime>,
     /// The rendered frame being ingested.
     ingest: Option<Ingest>,
@@ -157,13 +162,16 @@ impl Executor for CpuBackend {
             },
             prev,
             spare: self.previous.take(),
+            follows: plan.follows,
         });
         Ok(())
     }
 
     fn history(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
         let i = ingesting(&mut self.ingest)?;
-        let prev = i.prev.as_ref().filter(|(_, p)| p.k == plan.k);
+        // After a gap the motion does not reach the previous frame: the
+        // history restarts.
+        let prev = i.prev.as_ref().filter(|(_, p)| p.k == plan.k && i.follows);
         let prev = prev.map(|(camera, p)| history::PrevHistory {
             camera: *camera,
             positions: &p.history.positions,
@@ -225,6 +233,7 @@ impl Executor for CpuBackend {
             .ok_or(FramegenError::PassOrder("ingested() before upload()"))?;
         let dynamic = i.state.history.dynamic;
         self.previous = i.prev.map(|(_, p)| p);
+        self.paired = i.follows;
         self.current = Some(i.state);
         Ok(dynamic)
     }
@@ -239,7 +248,8 @@ impl Executor for CpuBackend {
 
     fn has_previous(&self) -> bool {
         let len = |s: &FrameState| s.frame.depth.len();
-        matches!((&self.current, &self.previous), (Some(c), Some(p)) if len(c) == len(p))
+        self.paired
+            && matches!((&self.current, &self.previous), (Some(c), Some(p)) if len(c) == len(p))
     }
 
     fn crop(&mut self, c: &crop::Crop, still: bool) -> Result<(), FramegenError> {

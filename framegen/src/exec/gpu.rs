@@ -178,6 +178,8 @@ struct Ingest {
     /// Whether the plan continues the history and tracks (the dynamic
     /// count is read back only then).
     counted: bool,
+    /// Whether the frame's motion points to `prev` (no gap between them).
+    follows: bool,
     keys: wgpu::Buffer,
     winners: wgpu::Buffer,
     candidates: wgpu::Buffer,
@@ -190,7 +192,12 @@ pub struct GpuBackend {
     ctx: Arc<GpuContext>,
     kernels: Kernels,
     current: Option<FrameBuffers>,
+    /// The frame before `current` (interpolation's α = 0 when `paired`),
+    /// or buffers to reuse.
     spare: Option<FrameBuffers>,
+    /// Whether `current`'s motion points to `spare` (no frame between
+    /// them went missing).
+    paired: bool,
     scratch: Scratch,
     rec: Recorder,
     /// The rendered frame being ingested.
@@ -286,6 +293,7 @@ impl GpuBackend {
             kernels,
             current: None,
             spare: None,
+            paired: false,
             scratch: Scratch::default(),
             rec: Recorder::default(),
             ingest: None,
@@ -492,7 +500,8 @@ impl Executor for GpuBackend {
         self.ingest = Some(Ingest {
             buffers,
             prev,
-            counted: plan.prev.is_some() && plan.k > 0,
+            counted: plan.prev.is_some() && plan.follows && plan.k > 0,
+            follows: plan.follows,
             keys: ensure(ctx, pool, &mut s.keys, "keys", slots).clone(),
             winners: ensure(ctx, pool, &mut s.winners, "winners", slots).clone(),
             candidates: ensure(ctx, pool, &mut s.candidates, "candidates", sources).clone(),
@@ -505,7 +514,9 @@ impl Executor for GpuBackend {
         let plan = *plan;
         self.record_ingest(Pass::History, |ctx, k, i, enc| {
             enc.clear_buffer(&i.dynamic, 0, None);
-            let prev = i.prev.as_ref().filter(|(_, p)| p.k == plan.k);
+            // After a gap the motion does not reach the previous frame: the
+            // history restarts.
+            let prev = i.prev.as_ref().filter(|(_, p)| p.k == plan.k && i.follows);
             let b = &i.buffers;
             k.history.encode(
                 ctx,
@@ -571,6 +582,7 @@ impl Executor for GpuBackend {
             None => 0,
         };
         self.spare = i.prev.map(|(_, b)| b);
+        self.paired = i.follows;
         self.current = Some(i.buffers);
         Ok(count)
     }
@@ -614,7 +626,7 @@ impl Executor for GpuBackend {
     }
 
     fn has_previous(&self) -> bool {
-        matches!((&self.current, &self.spare), (Some(c), Some(p)) if c.n == p.n)
+        self.paired && matches!((&self.current, &self.spare), (Some(c), Some(p)) if c.n == p.n)
     }
 
     fn crop(&mut self, crop: &Crop, still: bool) -> Result<(), FramegenError> {

@@ -83,6 +83,12 @@ pub struct IngestPlan {
     pub camera: PassCamera,
     /// `C_{t−1}` relative to `C_t`'s centre; `None` restarts the history.
     pub prev: Option<PassCamera>,
+    /// Whether the frame's motion vectors point to that previous frame.
+    /// After a gap (frames that never arrived) they do not: the history
+    /// restarts as without a previous frame (every pixel static, no
+    /// trajectory), the background layers still carry over (positions and
+    /// cameras need no motion), and interpolation has no pair.
+    pub follows: bool,
     /// History length (1 = positions of this frame and the static test
     /// only, 0 = no tracking at all: `repeat` needs none).
     pub k: u32,
