@@ -34,16 +34,30 @@ pub struct LocalServer {
 /// Starts a server on 127.0.0.1 (a free port) rendering `scene` live at
 /// `size` and `fps`.
 pub fn start_local(scene: &str, size: FrameSize, fps: f64) -> anyhow::Result<LocalServer> {
+    start_local_windowed(scene, size, fps, WindowMode::Off)
+}
+
+/// [`start_local`] with the adaptive rendering window in `mode` (GFFE §4.3).
+pub fn start_local_windowed(
+    scene: &str,
+    size: FrameSize,
+    fps: f64,
+    mode: WindowMode,
+) -> anyhow::Result<LocalServer> {
+    let window = WindowSettings {
+        mode,
+        ..WindowSettings::default()
+    };
     start_local_from(
         SourceSpec::Scene {
             spec: scene.into(),
             size,
             fps,
-            window: WindowSettings::default(),
+            window,
             base: std::path::PathBuf::from("."),
         },
-        size,
-        fps,
+        (size, fps),
+        window,
     )
 }
 
@@ -57,12 +71,16 @@ pub fn start_local_dump(dir: &std::path::Path) -> anyhow::Result<LocalServer> {
             dir: dir.to_path_buf(),
             looped: true,
         },
-        dump.size(),
-        dump.fps(),
+        (dump.size(), dump.fps()),
+        WindowSettings::default(),
     )
 }
 
-fn start_local_from(spec: SourceSpec, size: FrameSize, fps: f64) -> anyhow::Result<LocalServer> {
+fn start_local_from(
+    spec: SourceSpec,
+    (size, fps): (FrameSize, f64),
+    window: WindowSettings,
+) -> anyhow::Result<LocalServer> {
     let identity_dir = tempfile::tempdir()?;
     let identity = Identity::load_or_create(identity_dir.path())?;
     let token = format!("demo-{}", std::process::id());
@@ -71,10 +89,10 @@ fn start_local_from(spec: SourceSpec, size: FrameSize, fps: f64) -> anyhow::Resu
         token: token.clone(),
         server_name: "in-process demo server".into(),
         size,
-        max_frame: size,
+        max_frame: host::session::max_frame(size, &window),
         fps,
         buffers: buffers.clone(),
-        window_mode: WindowMode::Off,
+        window_mode: window.mode,
     };
     let frames = Source::channel();
     let source = Source::start(spec, buffers, frames.clone())?;

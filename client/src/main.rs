@@ -525,7 +525,7 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             l.server.shutdown().await;
         }
         println!(
-            "method {} on {}: received {} frames, {} vsyncs missed; generation ms p50 {:.2} p99 {:.2}; ingest ms p50 {:.2} p99 {:.2}",
+            "method {} on {}: received {} frames, {} vsyncs missed; generation ms p50 {:.2} p99 {:.2}; ingest ms p50 {:.2} p99 {:.2}; history restarts {}",
             report.method,
             report.backend,
             report.received,
@@ -534,6 +534,7 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             report.generation_ms.p99,
             report.ingest_ms.p50,
             report.ingest_ms.p99,
+            report.restarts,
         );
         print!("{}", report.summary.to_text());
         if let Some(path) = &args.json {

@@ -13,7 +13,8 @@
 //! the session's queue (at most one vsync after its last byte arrived); its
 //! ready time is after it was pushed into the generator (upload, history
 //! tracking, background collection). When several frames arrived within one
-//! vsync only the newest is pushed; the others are superseded.
+//! vsync all are pushed in stream order (each frame's motion points to the
+//! one before it) and only the newest is shown; the others are superseded.
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -22,7 +23,7 @@ use std::time::{Duration, Instant};
 
 use framegen::accounting::{Accounting, Percentiles, Record, Summary};
 use framegen::schedule::{FrameReady, Policy, ScheduleConfig, Scheduler, Slot, SlotKind};
-use framegen::{FrameGenerator, GpuContext, Method, Settings};
+use framegen::{FrameGenerator, GpuContext, Method, PushOutcome, Settings};
 use protocol::Frame;
 use serde::Serialize;
 
@@ -95,6 +96,9 @@ pub struct Report {
     pub generation_ms: Percentiles,
     /// Push (upload + history + background) time per rendered frame, ms.
     pub ingest_ms: Percentiles,
+    /// Pushes that restarted the generator's history (the first frame,
+    /// cuts, size changes; `framegen::PushOutcome::Restarted`).
+    pub restarts: u64,
     /// Latency summary.
     pub summary: Summary,
     /// Every displayed frame.
@@ -117,9 +121,14 @@ pub async fn run_headless(
         max_alpha: config.max_alpha,
         ..base
     };
+    // The display keeps the session's size: a widened window changes the
+    // rendered size (keep-density) or the displayed region's (keep-size)
+    // from frame to frame, never what is shown.
+    let display = session.welcome.size;
     let settings = Settings {
         n: config.n,
         max_alpha: config.max_alpha.max(1.0),
+        display_size: Some((display.width, display.height)),
         ..Settings::for_method(config.method)
     };
     let mut generator = match (&gpu, config.cpu) {
@@ -151,8 +160,9 @@ pub async fn run_headless(
         .await
         .map_err(|_| anyhow::anyhow!("no frame within {FIRST_FRAME_TIMEOUT:?}"))?
         .ok_or_else(|| anyhow::anyhow!("the session ended before its first frame"))?;
+    let mut first_outcome = PushOutcome::Duplicate;
     tokio::task::block_in_place(|| -> anyhow::Result<()> {
-        generator.push(&first)?;
+        first_outcome = generator.push(&first)?;
         generator.generate(0.5)?;
         Ok(())
     })?;
@@ -167,9 +177,13 @@ pub async fn run_headless(
     });
     // Rendered frames that may still be shown (the newest few).
     let lazy = policy == Policy::Interpolate;
-    let mut pushed = Some(first.meta.index);
+    let mut pusher = Pusher {
+        last: Some(first.meta.index),
+        ingest_ms: Vec::new(),
+        restarts: u64::from(matches!(first_outcome, PushOutcome::Restarted { .. })),
+    };
     let mut kept: VecDeque<Frame> = VecDeque::from([first]);
-    let (mut generation, mut ingest) = (Vec::new(), Vec::new());
+    let mut generation = Vec::new();
     let (mut received, mut missed) = (1u64, 0u64);
     let mut k: u64 = 0;
     let last = (config.duration.as_secs_f64() / di.as_secs_f64()).floor() as u64;
@@ -188,14 +202,12 @@ pub async fn run_headless(
         while let Ok(frame) = session.frames.try_recv() {
             arrived.push((frame, clock()));
         }
-        arrived.sort_by_key(|(f, _)| f.meta.index);
         received += arrived.len() as u64;
         // Extrapolation generates from the newest frame at once;
         // interpolation pushes up to the pair when a slot between them
         // comes up.
         if !lazy {
-            let due: Vec<&Frame> = arrived.iter().map(|(f, _)| f).collect();
-            push_in_order(&mut generator, due, &mut pushed, &mut ingest)?;
+            pusher.push(&mut generator, arrived.iter().map(|(f, _)| f))?;
         }
         let ready_at = clock();
         for (frame, received_at) in arrived {
@@ -213,10 +225,8 @@ pub async fn run_headless(
         }
         if let Some(slot) = scheduler.vsync(vsync) {
             if let (SlotKind::Interpolated, Some(next)) = (slot.kind, slot.next) {
-                let mut due: Vec<&Frame> =
-                    kept.iter().filter(|f| f.meta.index <= next.id).collect();
-                due.sort_by_key(|f| f.meta.index);
-                push_in_order(&mut generator, due, &mut pushed, &mut ingest)?;
+                let due = kept.iter().filter(|f| f.meta.index <= next.id);
+                pusher.push(&mut generator, due)?;
             }
             let (image, ready_at) = produce(&slot, &mut generator, &kept, &mut generation, start)?;
             if let (Some(dir), Some(image)) = (&config.png_dir, &image) {
@@ -235,7 +245,7 @@ pub async fn run_headless(
                     &accounting,
                     received,
                     clock(),
-                    (&generation, &ingest, rtt),
+                    (&generation, &pusher.ingest_ms, rtt),
                     scheduler.drops(),
                 );
                 if !send_to_window(sink, image, stats) {
@@ -265,31 +275,49 @@ pub async fn run_headless(
         received,
         missed_vsyncs: missed,
         generation_ms: Percentiles::of(generation),
-        ingest_ms: Percentiles::of(ingest),
+        ingest_ms: Percentiles::of(pusher.ingest_ms),
+        restarts: pusher.restarts,
         summary,
         records: accounting.records().to_vec(),
     })
 }
 
-/// Pushes the frames of `due` (in stream order) that come after the last
-/// pushed one; one that arrived after a newer one was pushed can no longer
-/// join the history and is left out. Records each push's time.
-fn push_in_order(
-    generator: &mut FrameGenerator,
-    due: Vec<&Frame>,
-    pushed: &mut Option<u64>,
-    ingest: &mut Vec<f64>,
-) -> anyhow::Result<()> {
-    for f in due {
-        if pushed.is_some_and(|p| f.meta.index <= p) {
-            continue;
+/// Pushes rendered frames into the generator in stream order.
+struct Pusher {
+    /// The index of the last frame pushed.
+    last: Option<u64>,
+    /// Each push's time, ms.
+    ingest_ms: Vec<f64>,
+    /// Pushes that restarted the history.
+    restarts: u64,
+}
+
+impl Pusher {
+    /// Pushes the frames of `due` that come after the last pushed one, in
+    /// stream order; one that arrived after a newer one was pushed can no
+    /// longer join the history and is left out.
+    fn push<'a>(
+        &mut self,
+        generator: &mut FrameGenerator,
+        due: impl IntoIterator<Item = &'a Frame>,
+    ) -> anyhow::Result<()> {
+        let mut due: Vec<&Frame> = due.into_iter().collect();
+        due.sort_by_key(|f| f.meta.index);
+        for f in due {
+            if self.last.is_some_and(|p| f.meta.index <= p) {
+                continue;
+            }
+            let t = Instant::now();
+            let outcome = tokio::task::block_in_place(|| generator.push(f))?;
+            self.ingest_ms.push(t.elapsed().as_secs_f64() * 1e3);
+            self.last = Some(f.meta.index);
+            if let PushOutcome::Restarted { reason } = outcome {
+                tracing::debug!(frame = f.meta.index, reason, "history restarted");
+                self.restarts += 1;
+            }
         }
-        let t = Instant::now();
-        tokio::task::block_in_place(|| generator.push(f))?;
-        ingest.push(t.elapsed().as_secs_f64() * 1e3);
-        *pushed = Some(f.meta.index);
+        Ok(())
     }
-    Ok(())
 }
 
 /// The image of a slot and when it was ready (the source frame's ready
@@ -303,11 +331,13 @@ fn produce(
 ) -> anyhow::Result<(Option<Frame>, Option<Duration>)> {
     match slot.kind {
         SlotKind::Rendered | SlotKind::Repeated => {
-            let frame = kept
-                .iter()
-                .find(|f| f.meta.index == slot.source.id)
-                .cloned();
-            Ok((frame, Some(slot.source.ready_at)))
+            // Its displayed region (a no-op without a widened window).
+            let frame = kept.iter().find(|f| f.meta.index == slot.source.id);
+            let shown = match frame {
+                Some(f) => Some(tokio::task::block_in_place(|| generator.displayed(f))?),
+                None => None,
+            };
+            Ok((shown, Some(slot.source.ready_at)))
         }
         SlotKind::Extrapolated | SlotKind::Interpolated => {
             let t = Instant::now();

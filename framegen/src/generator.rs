@@ -191,6 +191,32 @@ impl FrameGenerator {
         &self.settings
     }
 
+    /// `frame` as the display shows it: its displayed region (the plain
+    /// view of a frame rendered with a widened window, DESIGN §4.5) at the
+    /// display size, with the plain view's camera and motion in displayed
+    /// pixels; a frame already at the display size with a full window as
+    /// it is. Rendered frames go to the display through this, generated
+    /// ones are made in the displayed view.
+    pub fn displayed(&self, frame: &Frame) -> Result<Frame, FramegenError> {
+        frame.validate(&self.limits)?;
+        let (_, crop) = displayed_region(&frame.meta, self.settings.display_size);
+        if crop.is_identity() {
+            return Ok(frame.clone());
+        }
+        let p = prepare(frame);
+        let out = crate::passes::common::crop::crop(&p.color, &p.depth, &p.motion, &crop, false);
+        let (width, height) = crop.output;
+        let meta = FrameMeta {
+            camera: Camera {
+                window: Window::FULL,
+                ..frame.meta.camera
+            },
+            size: FrameSize { width, height },
+            ..frame.meta
+        };
+        Ok(finish(meta, 0.0, out).frame)
+    }
+
     /// The backend's name.
     pub fn backend_name(&self) -> String {
         self.backend.name()

@@ -26,6 +26,19 @@ pub struct Policy {
     pub window_mode: WindowMode,
 }
 
+/// The largest frame a stream of displayed `size` sends with `window`: a
+/// widened window at the same pixel density (keep-density) grows each side
+/// by up to the window's `max_extent`; keep-size keeps the size.
+pub fn max_frame(size: FrameSize, window: &scene::render::WindowSettings) -> FrameSize {
+    match window.mode {
+        WindowMode::KeepDensity => {
+            let grow = |v: u32| (f64::from(v) * window.max_extent.max(1.0)).ceil() as u32 + 1;
+            FrameSize::new(grow(size.width), grow(size.height))
+        }
+        WindowMode::Off | WindowMode::KeepSize => size,
+    }
+}
+
 /// Compares two byte strings in time independent of where they differ.
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     let mut diff = a.len() ^ b.len();

@@ -380,13 +380,13 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         bytes.iter().map(|b| format!("{b:02x}")).collect()
     });
     let buffers = protocol::wire::StreamBuffer::default_set(args.color_codec).to_vec();
-    // A widened window can make frames up to 1.5× larger per side.
-    let max_frame = match args.window {
-        WindowMode::KeepDensity => {
-            FrameSize::new(args.size.width * 3 / 2 + 1, args.size.height * 3 / 2 + 1)
-        }
-        _ => args.size,
-    };
+    let max_frame = host::session::max_frame(
+        args.size,
+        &WindowSettings {
+            mode: args.window,
+            ..WindowSettings::default()
+        },
+    );
     let policy = host::session::Policy {
         token: token.clone(),
         server_name: "framegen-stream server".into(),

@@ -9,6 +9,7 @@ use client::present::{PresentConfig, run_headless};
 use framegen::Method;
 use framegen::schedule::SlotKind;
 use protocol::FrameSize;
+use protocol::wire::WindowMode;
 
 const SIZE: FrameSize = FrameSize::new(160, 90);
 
@@ -40,10 +41,22 @@ async fn present_at(
     gpu: bool,
     adjust: impl FnOnce(&mut PresentConfig),
 ) -> client::present::Report {
+    present_windowed(WindowMode::Off, fps, method, seconds, gpu, adjust).await
+}
+
+/// [`present_at`] with the server's adaptive window in `mode`.
+async fn present_windowed(
+    mode: WindowMode,
+    fps: f64,
+    method: Method,
+    seconds: f64,
+    gpu: bool,
+    adjust: impl FnOnce(&mut PresentConfig),
+) -> client::present::Report {
     // One presenter at a time: each runs a server and a client on a machine
     // with two cores.
     let _alone = ALONE.lock().await;
-    let local = client::demo::start_local("builtin:default", SIZE, fps).unwrap();
+    let local = client::demo::start_local_windowed("builtin:default", SIZE, fps, mode).unwrap();
     let mut session = local.connect().await.unwrap();
     let mut config = PresentConfig {
         method,
@@ -202,4 +215,33 @@ async fn a_given_refresh_rate_and_a_dump_of_what_was_presented() {
     let reader = protocol::dump::DumpReader::open(&dump).unwrap();
     assert_eq!(reader.len(), r.records.len() as u64);
     assert!((reader.manifest().fps - 75.0).abs() < 0.01);
+}
+
+/// A stream rendered with the adaptive window (GFFE §4.3): every presented
+/// frame, rendered or generated, is the displayed view at the session's
+/// size (a rendered frame is cropped to it), and neither mode restarts the
+/// history after the first frame (keep-size changes the displayed
+/// region's size every frame, the display size stays).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn windowed_streams_are_presented_as_the_displayed_view() {
+    for mode in [WindowMode::KeepDensity, WindowMode::KeepSize] {
+        let dir = tempfile::tempdir().unwrap();
+        let dump = dir.path().join("presented");
+        let target = dump.clone();
+        let r = present_windowed(mode, 30.0, Method::Gffe, 2.0, false, move |c| {
+            c.dump_dir = Some(target);
+        })
+        .await;
+        assert_eq!(r.restarts, 1, "{mode:?}: {} restarts", r.restarts);
+        let reader = protocol::dump::DumpReader::open(&dump).unwrap();
+        assert_eq!(reader.len(), r.records.len() as u64);
+        let mut rendered = 0;
+        for (k, record) in r.records.iter().enumerate() {
+            let f = reader.read_frame(k as u64).unwrap();
+            assert_eq!(f.meta.size, SIZE, "{mode:?} slot {k}");
+            assert!(f.meta.camera.window.is_full(), "{mode:?} slot {k}");
+            rendered += usize::from(record.kind == SlotKind::Rendered);
+        }
+        assert!(rendered > 0 && rendered < r.records.len(), "{mode:?}");
+    }
 }
