@@ -93,12 +93,23 @@ pub struct SessionStats {
     pub stream_errors: u64,
 }
 
+/// A complete, decoded frame and when it got there.
+#[derive(Debug)]
+pub struct Arrived {
+    /// The frame.
+    pub frame: Frame,
+    /// When its last byte had been taken from the connection.
+    pub received: Instant,
+    /// When it was decoded (it could be shown from then on).
+    pub decoded: Instant,
+}
+
 /// A connected session. Frames arrive on [`Session::frames`].
 pub struct Session {
     /// The server's welcome.
     pub welcome: Welcome,
     /// Complete, decoded frames, in order; closed when the session ends.
-    pub frames: mpsc::Receiver<Frame>,
+    pub frames: mpsc::Receiver<Arrived>,
     conn: quinn::Connection,
     endpoint: quinn::Endpoint,
     stats: Arc<Mutex<SessionStats>>,
@@ -299,7 +310,7 @@ async fn assemble(
     conn: quinn::Connection,
     limits: Limits,
     mut rx: mpsc::Receiver<StreamEvent>,
-    frames: mpsc::Sender<Frame>,
+    frames: mpsc::Sender<Arrived>,
     cancelled: Arc<Mutex<HashSet<StreamId>>>,
     stats: Arc<Mutex<SessionStats>>,
     failure: Arc<Mutex<Option<String>>>,
@@ -351,9 +362,15 @@ async fn assemble(
             }
         }
         if let Some(encoded) = delivery.frame {
+            let received = Instant::now();
             match encoded.decode() {
                 Ok(frame) => {
-                    if frames.send(frame).await.is_err() {
+                    let arrived = Arrived {
+                        frame,
+                        received,
+                        decoded: Instant::now(),
+                    };
+                    if frames.send(arrived).await.is_err() {
                         return;
                     }
                 }

@@ -17,6 +17,6 @@ pub mod receiver;
 pub mod tls;
 pub mod window;
 
-pub use connect::{ConnectConfig, ConnectError, Session, SessionStats, connect};
+pub use connect::{Arrived, ConnectConfig, ConnectError, Session, SessionStats, connect};
 pub use receiver::{Delivery, FrameReceiver, ReceiveError, StreamId};
 pub use tls::Pin;

@@ -366,7 +366,7 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
                 break;
             }
             let frame = match tokio::time::timeout(Duration::from_millis(250), session.frames.recv()).await {
-                Ok(Some(f)) => f,
+                Ok(Some(a)) => a.frame,
                 Ok(None) => break,
                 Err(_) => continue,
             };

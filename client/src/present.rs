@@ -9,12 +9,14 @@
 //! Presented frames can be written as display-encoded PNGs.
 //!
 //! Times are from the moment the first frame was pushed (kernels compiled,
-//! stream running). A frame's receive time is when the loop took it from
-//! the session's queue (at most one vsync after its last byte arrived); its
-//! ready time is after it was pushed into the generator (upload, history
-//! tracking, background collection). When several frames arrived within one
-//! vsync all are pushed in stream order (each frame's motion points to the
-//! one before it) and only the newest is shown; the others are superseded.
+//! stream running). Per rendered frame: received (its last byte taken from
+//! the connection), ready (decoded), ingested (pushed into the generator:
+//! upload, history tracking, background collection) and present; the
+//! ingest and any generation on the way to showing it count as added
+//! latency (`framegen::accounting`). The loop takes frames at vsyncs; when
+//! several arrived within one vsync all are pushed in stream order (each
+//! frame's motion points to the one before it) and only the newest is
+//! shown; the others are superseded.
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -151,7 +153,10 @@ pub async fn run_headless(
         None => None,
     };
     let mut scheduler = Scheduler::new(schedule);
-    let mut accounting = Accounting::new(schedule, Duration::ZERO);
+    // A slot is prepared after its vsync and shown at the next one at the
+    // earliest: a queue of one display interval, for rendered frames shown
+    // directly as for the rest.
+    let mut accounting = Accounting::new(schedule, Duration::ZERO, schedule.display_interval);
     let di = schedule.display_interval;
     // The clock starts when the first frame is in: waiting for the stream to
     // begin and compiling the GPU kernels (first push and generation) are
@@ -159,7 +164,8 @@ pub async fn run_headless(
     let first = tokio::time::timeout(FIRST_FRAME_TIMEOUT, session.frames.recv())
         .await
         .map_err(|_| anyhow::anyhow!("no frame within {FIRST_FRAME_TIMEOUT:?}"))?
-        .ok_or_else(|| anyhow::anyhow!("the session ended before its first frame"))?;
+        .ok_or_else(|| anyhow::anyhow!("the session ended before its first frame"))?
+        .frame;
     let mut first_outcome = PushOutcome::Duplicate;
     tokio::task::block_in_place(|| -> anyhow::Result<()> {
         first_outcome = generator.push(&first)?;
@@ -178,8 +184,10 @@ pub async fn run_headless(
     // Rendered frames that may still be shown (the newest few).
     let lazy = policy == Policy::Interpolate;
     let mut pusher = Pusher {
+        start,
         last: Some(first.meta.index),
         ingest_ms: Vec::new(),
+        ingested: VecDeque::from([(first.meta.index, Duration::ZERO)]),
         restarts: u64::from(matches!(first_outcome, PushOutcome::Restarted { .. })),
     };
     let mut kept: VecDeque<Frame> = VecDeque::from([first]);
@@ -199,24 +207,25 @@ pub async fn run_headless(
         // points to the one before it, and a frame left out is a gap in
         // the generator's history.
         let mut arrived = Vec::new();
-        while let Ok(frame) = session.frames.try_recv() {
-            arrived.push((frame, clock()));
+        while let Ok(a) = session.frames.try_recv() {
+            arrived.push(a);
         }
         received += arrived.len() as u64;
         // Extrapolation generates from the newest frame at once;
         // interpolation pushes up to the pair when a slot between them
         // comes up.
         if !lazy {
-            pusher.push(&mut generator, arrived.iter().map(|(f, _)| f))?;
+            pusher.push(&mut generator, arrived.iter().map(|a| &a.frame))?;
         }
-        let ready_at = clock();
-        for (frame, received_at) in arrived {
+        let since = |t: Instant| t.saturating_duration_since(start);
+        for a in arrived {
+            let frame = a.frame;
             scheduler.frame_ready(FrameReady {
                 id: frame.meta.index,
                 sim_time: frame.meta.time,
                 host_processing: frame.meta.host_processing,
-                received_at,
-                ready_at,
+                received_at: since(a.received),
+                ready_at: since(a.decoded),
             });
             kept.push_back(frame);
             if kept.len() > KEPT {
@@ -255,7 +264,8 @@ pub async fn run_headless(
             }
             let done = clock();
             let present_at = accounting.first_vsync_after(done.max(vsync + di));
-            accounting.record(&slot, ready_at.unwrap_or(done), present_at);
+            let ingested = pusher.ingested_at(slot.source.id);
+            accounting.record(&slot, ready_at.unwrap_or(done), ingested, present_at);
         }
         // Skip vsyncs that passed while this slot was prepared.
         let next = ((clock().as_secs_f64() / di.as_secs_f64()).floor() as u64).max(k + 1);
@@ -284,10 +294,14 @@ pub async fn run_headless(
 
 /// Pushes rendered frames into the generator in stream order.
 struct Pusher {
+    /// The presenter's clock origin.
+    start: Instant,
     /// The index of the last frame pushed.
     last: Option<u64>,
     /// Each push's time, ms.
     ingest_ms: Vec<f64>,
+    /// When the newest few frames were ingested (since `start`).
+    ingested: VecDeque<(u64, Duration)>,
     /// Pushes that restarted the history.
     restarts: u64,
 }
@@ -311,12 +325,25 @@ impl Pusher {
             let outcome = tokio::task::block_in_place(|| generator.push(f))?;
             self.ingest_ms.push(t.elapsed().as_secs_f64() * 1e3);
             self.last = Some(f.meta.index);
+            self.ingested
+                .push_back((f.meta.index, self.start.elapsed()));
+            if self.ingested.len() > 2 * KEPT {
+                self.ingested.pop_front();
+            }
             if let PushOutcome::Restarted { reason } = outcome {
                 tracing::debug!(frame = f.meta.index, reason, "history restarted");
                 self.restarts += 1;
             }
         }
         Ok(())
+    }
+
+    /// When frame `id` was ingested, if it was (recently).
+    fn ingested_at(&self, id: u64) -> Option<Duration> {
+        self.ingested
+            .iter()
+            .find(|(i, _)| *i == id)
+            .map(|(_, t)| *t)
     }
 }
 

@@ -4,6 +4,16 @@
 //! *presented*. Field names follow PresentMon where one fits
 //! (`ms_between_presents`, `ms_animation_error`).
 //!
+//! Per rendered frame four times are kept: *received* (its last byte
+//! taken from the connection), *ready* (decoded: a display could show it
+//! from then on), *ingested* (frame generation done with it: upload,
+//! history, background) and *present*. **Added latency** is what frame
+//! generation costs a rendered frame: its present against a display that
+//! shows rendered frames directly, through the same presenter (the first
+//! vsync after it was ready, plus the presenter's queue). Framegen work on
+//! the path to showing it (its ingest, a generation before it) counts;
+//! an ingest that ends before the frame's vsync costs nothing.
+//!
 //! "Present" is what the presenter reports: wgpu has no presentation-timing
 //! API, so the presenters here report the vsync the frame was submitted for
 //! (the slot's vsync when the submission finished before it, otherwise the
@@ -32,15 +42,20 @@ pub struct Record {
     pub host_processing_ms: f64,
     /// When the source's last byte arrived, ms since the session start.
     pub received_ms: f64,
-    /// When what was shown was ready, ms.
+    /// When what was shown was ready (a rendered frame decoded, a
+    /// generated one finished), ms.
     pub ready_ms: f64,
+    /// When frame generation had ingested the source rendered frame, ms
+    /// (none if it had not been by the present).
+    pub ingested_ms: Option<f64>,
     /// When it was presented, ms.
     pub present_ms: f64,
     /// ExtraNet latency: present − ready, ms.
     pub latency_ms: f64,
     /// For rendered frames: how much later it was shown than a display
     /// showing rendered frames directly would (the first vsync after it was
-    /// ready), ms. What frame generation adds.
+    /// ready, plus the presenter's queue; never below 0), ms. What frame
+    /// generation adds, its work on the way included.
     pub added_latency_ms: Option<f64>,
     /// Time between this present and the previous one, ms.
     pub ms_between_presents: Option<f64>,
@@ -118,6 +133,9 @@ pub struct Accounting {
     config: ScheduleConfig,
     /// Time of vsync 0 (the vsync grid is `origin + k · display_interval`).
     origin: Duration,
+    /// The presenter's queue: how long after its slot's vsync a frame is
+    /// presented at the earliest.
+    queued: Duration,
     records: Vec<Record>,
     last: Option<(f64, f64)>,
 }
@@ -127,11 +145,14 @@ fn ms(d: Duration) -> f64 {
 }
 
 impl Accounting {
-    /// Accounting for a display whose vsyncs are `origin + k·interval`.
-    pub fn new(config: ScheduleConfig, origin: Duration) -> Self {
+    /// Accounting for a display whose vsyncs are `origin + k·interval` and
+    /// whose presenter shows a slot `queued` after its vsync at the
+    /// earliest (a swap chain's queue).
+    pub fn new(config: ScheduleConfig, origin: Duration, queued: Duration) -> Self {
         Self {
             config,
             origin,
+            queued,
             records: Vec::new(),
             last: None,
         }
@@ -148,8 +169,15 @@ impl Accounting {
 
     /// Records a presented slot: `ready_at` is when its image was ready
     /// (the source's ready time for rendered and repeated slots, the end of
-    /// generation for generated ones), `present_at` when it was presented.
-    pub fn record(&mut self, slot: &Slot, ready_at: Duration, present_at: Duration) {
+    /// generation for generated ones), `ingested_at` when frame generation
+    /// had ingested its source, `present_at` when it was presented.
+    pub fn record(
+        &mut self,
+        slot: &Slot,
+        ready_at: Duration,
+        ingested_at: Option<Duration>,
+        present_at: Duration,
+    ) {
         let sim = slot.sim_time(self.config.render_interval) * 1e3;
         let present = ms(present_at);
         let (between, animation) = match self.last {
@@ -157,8 +185,11 @@ impl Accounting {
             None => (None, None),
         };
         self.last = Some((present, sim));
-        let added = (slot.kind == SlotKind::Rendered)
-            .then(|| present - ms(self.first_vsync_after(slot.source.ready_at)));
+        // A presenter running late may take a frame that became ready after
+        // the vsync it is working on and still show it at that slot's
+        // present, earlier than the reference; that is no latency added.
+        let direct = self.first_vsync_after(slot.source.ready_at) + self.queued;
+        let added = (slot.kind == SlotKind::Rendered).then(|| (present - ms(direct)).max(0.0));
         self.records.push(Record {
             display_id: slot.display_id,
             kind: slot.kind,
@@ -168,6 +199,7 @@ impl Accounting {
             host_processing_ms: ms(slot.source.host_processing),
             received_ms: ms(slot.source.received_at),
             ready_ms: ms(ready_at),
+            ingested_ms: ingested_at.map(ms),
             present_ms: present,
             latency_ms: present - ms(ready_at),
             added_latency_ms: added,
@@ -256,7 +288,7 @@ mod tests {
             let config = ScheduleConfig::multiple(policy, 30.0, 1);
             let di = config.display_interval;
             let mut s = Scheduler::new(config);
-            let mut acc = Accounting::new(config, Duration::ZERO);
+            let mut acc = Accounting::new(config, Duration::ZERO, Duration::ZERO);
             for v in 0..120u32 {
                 let now = di * v;
                 if v % 2 == 1 {
@@ -277,7 +309,7 @@ mod tests {
                         } else {
                             now
                         };
-                    acc.record(&slot, ready, now);
+                    acc.record(&slot, ready, Some(slot.source.ready_at), now);
                 }
             }
             let sum = acc.summary(s.drops());
@@ -292,6 +324,36 @@ mod tests {
                 sum.ms_animation_error
             );
             assert!(sum.to_text().contains("MsBetweenPresents"));
+        }
+    }
+
+    /// A rendered frame decoded before its vsync but ingested after it is
+    /// shown a vsync later than a direct display would show it: the ingest
+    /// on its path is added latency; one ingested in time adds none.
+    #[test]
+    fn an_ingest_on_the_path_is_added_latency() {
+        let config = ScheduleConfig::multiple(Policy::Extrapolate, 30.0, 1);
+        let di = config.display_interval;
+        for (ingest_ms, added) in [(1, 0.0), (10, ms(di))] {
+            let mut s = Scheduler::new(config);
+            let mut acc = Accounting::new(config, Duration::ZERO, Duration::ZERO);
+            let ready = di - Duration::from_millis(2);
+            s.frame_ready(FrameReady {
+                id: 0,
+                sim_time: 0.0,
+                host_processing: Duration::ZERO,
+                received_at: ready - Duration::from_millis(1),
+                ready_at: ready,
+            });
+            let slot = s.vsync(di).expect("a slot");
+            assert_eq!(slot.kind, SlotKind::Rendered);
+            let ingested = ready + Duration::from_millis(ingest_ms);
+            // Shown at the first vsync after the ingest.
+            let present = acc.first_vsync_after(ingested);
+            acc.record(&slot, ready, Some(ingested), present);
+            let r = &acc.records()[0];
+            assert!((r.added_latency_ms.unwrap() - added).abs() < 1e-9, "{r:?}");
+            assert!(r.received_ms < r.ready_ms && r.ingested_ms.unwrap() <= r.present_ms);
         }
     }
 }

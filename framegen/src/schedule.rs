@@ -104,7 +104,8 @@ pub struct FrameReady {
     pub host_processing: Duration,
     /// When its last byte arrived.
     pub received_at: Duration,
-    /// When it was decoded and uploaded (ExtraNet's "generated").
+    /// When it was decoded: a display could show it from then on
+    /// (ExtraNet's "generated"; frame generation's ingest comes after).
     pub ready_at: Duration,
 }
 

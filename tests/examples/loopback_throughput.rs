@@ -101,7 +101,7 @@ async fn main() -> anyhow::Result<()> {
             let got = tokio::time::timeout(Duration::from_secs(10), session.frames.recv())
                 .await?
                 .ok_or_else(|| anyhow::anyhow!("session ended"))?;
-            anyhow::ensure!(got.meta.index == f.index, "frames out of order");
+            anyhow::ensure!(got.frame.meta.index == f.index, "frames out of order");
             times.push(start.elapsed().as_secs_f64() * 1000.0);
             total_bytes += f.bytes.len();
         }

@@ -112,10 +112,10 @@ async fn a_blender_render_streams_without_import() {
     );
     let mut session = client::connect(config).await.unwrap();
     let mut got = Vec::new();
-    while let Ok(Some(f)) =
+    while let Ok(Some(a)) =
         tokio::time::timeout(Duration::from_secs(10), session.frames.recv()).await
     {
-        got.push(f);
+        got.push(a.frame);
     }
     assert_eq!(got.len(), 10);
     for (i, g) in got.iter().enumerate() {

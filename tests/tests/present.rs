@@ -112,6 +112,17 @@ async fn extrapolation_fills_every_slot_without_adding_latency() {
         s.added_latency_ms
     );
     assert!(r.records.iter().all(|x| x.latency_ms >= 0.0));
+    // Every rendered frame's path in order: its last byte, decoded,
+    // ingested by the generator, presented (the ingest counts toward the
+    // added latency, never hidden in the ready time).
+    for x in r.records.iter().filter(|x| x.kind == SlotKind::Rendered) {
+        let ingested = x.ingested_ms.expect("shown rendered frames were ingested");
+        assert!(
+            x.received_ms <= x.ready_ms && x.ready_ms <= ingested && ingested <= x.present_ms,
+            "{x:?}"
+        );
+        assert!(x.added_latency_ms.unwrap() >= -1e-6, "{x:?}");
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -110,7 +110,7 @@ async fn receive_all(session: &mut client::Session) -> Vec<Frame> {
     let mut out = Vec::new();
     while out.len() < FRAMES as usize {
         match tokio::time::timeout(Duration::from_secs(10), session.frames.recv()).await {
-            Ok(Some(f)) => out.push(f),
+            Ok(Some(a)) => out.push(a.frame),
             Ok(None) | Err(_) => break,
         }
     }
