@@ -102,6 +102,8 @@ impl Percentiles {
 pub struct Summary {
     /// What "present" means here.
     pub present_means: &'static str,
+    /// What "ready" and "added latency" mean here.
+    pub latency_means: &'static str,
     /// Displayed frames by kind.
     pub rendered: usize,
     /// Extrapolated slots.
@@ -126,6 +128,9 @@ pub struct Summary {
 
 /// What "present" means in every report.
 pub const PRESENT_MEANS: &str = "the vsync a frame was submitted for: its slot's vsync if the submission finished before it, else the next vsync (wgpu has no presentation timing)";
+
+/// What the latencies mean in every report.
+pub const LATENCY_MEANS: &str = "latency = present - ready; a rendered frame is ready when decoded, a generated one when finished; added latency (rendered frames) = present - (first vsync after ready + the presenter's queue), so frame generation's ingest and any generation on the way count";
 
 /// Collects [`Record`]s.
 #[derive(Clone, Debug)]
@@ -221,6 +226,7 @@ impl Accounting {
         };
         Summary {
             present_means: PRESENT_MEANS,
+            latency_means: LATENCY_MEANS,
             rendered: count(SlotKind::Rendered),
             extrapolated: count(SlotKind::Extrapolated),
             interpolated: count(SlotKind::Interpolated),
@@ -257,8 +263,12 @@ impl Summary {
         s += &p("MsBetweenPresents", &self.ms_between_presents);
         s += &p("MsAnimationError", &self.ms_animation_error);
         s += &format!(
-            "  drops: network {}, late {}, scheduler {}\n  present = {}\n",
-            self.drops.network, self.drops.late, self.drops.scheduler, self.present_means
+            "  drops: network {}, late {}, scheduler {}\n  present = {}\n  {}\n",
+            self.drops.network,
+            self.drops.late,
+            self.drops.scheduler,
+            self.present_means,
+            self.latency_means
         );
         s
     }
@@ -324,6 +334,7 @@ mod tests {
                 sum.ms_animation_error
             );
             assert!(sum.to_text().contains("MsBetweenPresents"));
+            assert!(sum.to_text().contains("ready when decoded"));
         }
     }
 
