@@ -66,12 +66,33 @@ def camera_entry(scene, frame):
     }
 
 
+def animated_objects(scene):
+    """Objects with an animation action (they move on their own)."""
+    return [
+        obj
+        for obj in scene.objects
+        if obj.animation_data is not None and obj.animation_data.action is not None
+    ]
+
+
 def mark_animated(scene):
-    """Give animated objects pass index 1 so the Object Index pass masks them."""
-    for obj in scene.objects:
-        anim = obj.animation_data
-        if anim is not None and anim.action is not None and obj.pass_index == 0:
-            obj.pass_index = 1
+    """Give animated objects without a pass index one no other object uses,
+    so the Object Index pass tells them apart."""
+    fresh = max([obj.pass_index for obj in scene.objects] + [0]) + 1
+    for obj in animated_objects(scene):
+        if obj.pass_index == 0:
+            obj.pass_index = fresh
+
+
+def animated_pass_indices(scene):
+    """The pass indices the importer masks, or None when an animated object
+    has none (index 0 is every unindexed object): the importer then derives
+    the mask from the motion. A static object sharing an animated object's
+    index is masked with it."""
+    indices = sorted({obj.pass_index for obj in animated_objects(scene)})
+    if 0 in indices:
+        return None
+    return indices
 
 
 def setup_render(scene, out):
@@ -108,6 +129,9 @@ def export(scene, out, render=False):
         "view_layer": bpy.context.view_layer.name,
         "frames": frames,
     }
+    listed = animated_pass_indices(scene)
+    if listed is not None:
+        sidecar["animated_pass_indices"] = listed
     with open(os.path.join(out, SIDECAR), "w") as f:
         json.dump(sidecar, f, indent=1)
         f.write("\n")

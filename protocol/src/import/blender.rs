@@ -44,10 +44,18 @@
 //!   `sensor_width` to the larger image side, `HORIZONTAL` fits
 //!   `sensor_width` to the width, `VERTICAL` fits `sensor_height` to the
 //!   height; `tan(fov/2) = sensor / (2 · lens)` on the fitted side.
-//! * **Object Index pass.** Where present, pixels with an index above 0
-//!   become this crate's mask (animated objects): the export script gives
-//!   animated objects index 1, and the import check then uses only the
-//!   unmasked pixels.
+//! * **Animated objects** become this crate's mask, and the import check
+//!   uses only the unmasked pixels. The export script gives every animated
+//!   object without one a pass index of its own and lists the animated
+//!   objects' indices in the sidecar (`animated_pass_indices`): pixels of
+//!   the Object Index pass with a listed index are masked, and nothing
+//!   else, so a scene that uses pass indices for compositing keeps its
+//!   static objects unmasked. A sidecar without the list (older exports,
+//!   other tools) gets the mask from the motion itself: a pixel whose
+//!   Vector pass disagrees with its depth + the two cameras by more than
+//!   [`MOVING_PX`] moved on its own (the fixture's static pixels agree to
+//!   a mean of 0.0089 px); the first frame, with no camera before it, has
+//!   no mask then.
 //!
 //! Not supported, with a typed error: orthographic and panoramic cameras,
 //! lens shift (an off-centre frustum this crate's projection cannot
@@ -65,6 +73,10 @@ use super::{
 use crate::camera::{Camera, Pose, Projection};
 use crate::dump::{DumpError, mask_bytes, missing_as_frame, read_planes, rgb_pixel};
 use crate::frame::{BufferKind, ExtraBuffer, Frame, FrameSize};
+
+/// Motion that disagrees with depth + camera by more than this (pixels)
+/// marks an animated pixel when the sidecar lists no pass indices.
+pub const MOVING_PX: f32 = 0.5;
 
 /// The sidecar's `format`.
 pub const FORMAT: &str = "framegen-blender-cameras";
@@ -89,6 +101,10 @@ pub struct Sidecar {
     /// View layer whose passes to read.
     #[serde(default = "default_view_layer")]
     pub view_layer: String,
+    /// Pass indices of the animated objects (the Object Index pass's
+    /// values to mask); absent: the mask comes from the motion.
+    #[serde(default)]
+    pub animated_pass_indices: Option<Vec<u32>>,
     /// One entry per rendered frame, in order.
     pub frames: Vec<SidecarFrame>,
 }
@@ -346,11 +362,30 @@ impl BlenderDump {
                 }
             })
             .collect();
-        if let Some(index) = find("IndexOB.X") {
-            let mask: Vec<f32> = index
-                .iter()
-                .map(|&v| f32::from(u8::from(v > 0.5)))
-                .collect();
+        let animated: Option<Vec<bool>> = match (&self.sidecar.animated_pass_indices, prev) {
+            (Some(listed), _) => Some(match find("IndexOB.X") {
+                Some(index) => index
+                    .iter()
+                    .map(|&v| v >= 0.5 && listed.contains(&(v.round() as u32)))
+                    .collect(),
+                None => vec![false; n],
+            }),
+            (None, Some(prev)) => Some(
+                (0..n)
+                    .map(|i| {
+                        let d = frame.depth[i];
+                        from_file[i] && {
+                            let m = camera_motion(&frame.meta.camera, Some(prev), size, i, d);
+                            let (dx, dy) = (frame.motion[i][0] - m[0], frame.motion[i][1] - m[1]);
+                            dx.hypot(dy) > MOVING_PX
+                        }
+                    })
+                    .collect(),
+            ),
+            (None, None) => None,
+        };
+        if let Some(animated) = animated {
+            let mask: Vec<f32> = animated.iter().map(|&a| f32::from(u8::from(a))).collect();
             frame.extras.push(ExtraBuffer {
                 kind: BufferKind::Mask,
                 data: mask_bytes(&mask),
