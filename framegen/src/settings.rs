@@ -28,7 +28,7 @@ pub struct Settings {
     /// `crossing`'s objects move 1–2 px per frame and with ε = 2 gffe is
     /// exactly `repeat` there. The default stays 0.5; the silhouette noise
     /// wants a test that knows about silhouettes, not a looser threshold.
-        pub static_epsilon: f32,
+    pub static_epsilon: f32,
     /// Relative depth margin for "deeper" in background case 2.
     pub depth_tolerance: f32,
     /// Push-pull pyramid levels for the remaining holes (≥ 1; capped at

@@ -117,7 +117,7 @@ fn recycled_buffers_leave_no_trace() {
         prev: Some(&prev),
         k,
         epsilon: eps,
-        tolerance: tol,
+        tolerance: Some(tol),
     };
     let fresh = tracker.track_into(History::empty());
     let garbage = History {
@@ -133,6 +133,18 @@ fn recycled_buffers_leave_no_trace() {
     assert_eq!(bits(&fresh.positions), bits(&recycled.positions));
     assert_eq!(fresh.track, recycled.track);
     assert_eq!(fresh.dynamic, recycled.dynamic);
+    // Without a tolerance (no background to seed) nothing is confirmed and
+    // nothing else changes.
+    let unconfirmed = Tracker {
+        tolerance: None,
+        ..tracker
+    }
+    .track_into(History::empty());
+    assert!(fresh.track.iter().any(|w| history::is_confirmed(*w)));
+    assert!(!unconfirmed.track.iter().any(|w| history::is_confirmed(*w)));
+    let without = |t: &[u32]| t.iter().map(|w| w & !2).collect::<Vec<_>>();
+    assert_eq!(without(&fresh.track), without(&unconfirmed.track));
+    assert_eq!(bits(&fresh.positions), bits(&unconfirmed.positions));
 
     let seeds_b = Seeds {
         p0: &fresh.positions[..n],

@@ -190,7 +190,7 @@ impl Executor for CpuBackend {
                 prev: prev.as_ref(),
                 k: plan.k,
                 epsilon: plan.epsilon,
-                tolerance: plan.tolerance,
+                tolerance: plan.confirm_tolerance(),
             };
             tracker.track_into(reuse)
         });

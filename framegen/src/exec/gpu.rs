@@ -529,7 +529,7 @@ impl Executor for GpuBackend {
                 &i.dynamic,
                 plan.k,
                 plan.epsilon,
-                plan.tolerance,
+                plan.confirm_tolerance(),
             );
         })
     }

@@ -100,6 +100,14 @@ pub struct IngestPlan {
     pub tolerance: f32,
 }
 
+impl IngestPlan {
+    /// The history's confirmation tolerance: only a plan that collects
+    /// background layers confirms static pixels.
+    pub fn confirm_tolerance(&self) -> Option<f32> {
+        (self.levels.count > 0).then_some(self.tolerance)
+    }
+}
+
 /// One generated frame to make.
 #[derive(Clone, Copy, Debug)]
 pub struct Job {

@@ -25,7 +25,10 @@
 //!   camera) passes it, and would leave a ghost of the object in the
 //!   background. A static pixel is confirmed when the previous frame's
 //!   position at `x'`, seen from the current camera, lands in a pixel whose
-//!   depth agrees with it within the relative `tolerance`.
+//!   depth agrees with it within the relative `tolerance`. Only the
+//!   background needs it: a method that collects no background layers
+//!   passes no tolerance and confirms nothing (a second projection and a
+//!   random read per static pixel saved).
 //! * Invalid depth (sanitised NaN / ≤ 0) gives no position at all.
 //! * Without a previous frame (first frame, cut, reset) every pixel is
 //!   static.
@@ -88,7 +91,8 @@ pub fn chain(track: u32) -> u32 {
 }
 
 /// CPU reference of Algorithm 1. `camera` is `C_t` with its centre at the
-/// origin; `k ≥ 1`; `epsilon` in pixels; `tolerance` relative depth.
+/// origin; `k ≥ 1`; `epsilon` in pixels; `tolerance` relative depth (the
+/// confirmation runs).
 ///
 /// Runs on all cores: pixels are independent, so bands of rows are tracked
 /// in parallel and the result is the same for any thread count.
@@ -108,7 +112,7 @@ pub fn track(
         prev: prev.as_ref(),
         k,
         epsilon,
-        tolerance,
+        tolerance: Some(tolerance),
     };
     tracker.track_into(History::empty())
 }
@@ -132,8 +136,9 @@ pub struct Tracker<'a> {
     pub k: u32,
     /// Static-test threshold, pixels.
     pub epsilon: f32,
-    /// Relative depth tolerance of the confirmation.
-    pub tolerance: f32,
+    /// Relative depth tolerance of the confirmation; `None` confirms
+    /// nothing (no background is collected).
+    pub tolerance: Option<f32>,
 }
 
 impl Tracker<'_> {
@@ -237,7 +242,10 @@ impl Tracker<'_> {
             });
             let found =
                 cell(target, prev.camera.width(), prev.camera.height(), 1.0).map(|j| j as usize);
-            if is_static && let Some(j) = found {
+            if is_static
+                && let Some(j) = found
+                && let Some(tolerance) = tolerance
+            {
                 let q = rebase(prev.positions[j], shift(prev));
                 let agrees = q[3] == p[3]
                     && (q[3] == W_DIRECTION
@@ -297,7 +305,7 @@ struct Params {
     sizes: [u32; 4],
     /// k, has_prev, 0, 0
     config: [u32; 4],
-    /// epsilon, tolerance, 0, 0
+    /// epsilon, tolerance (negative: no confirmation), 0, 0
     epsilon: [f32; 4],
 }
 
@@ -348,7 +356,7 @@ impl GpuHistory {
         dynamic: &wgpu::Buffer,
         k: u32,
         epsilon: f32,
-        tolerance: f32,
+        tolerance: Option<f32>,
     ) {
         let (w, h) = (camera.width(), camera.height());
         let (prev_cam, pw, ph) = match &prev {
@@ -360,7 +368,7 @@ impl GpuHistory {
             prev: prev_cam,
             sizes: [w, h, pw, ph],
             config: [k.max(1), u32::from(prev.is_some()), 0, 0],
-            epsilon: [epsilon, tolerance, 0.0, 0.0],
+            epsilon: [epsilon, tolerance.unwrap_or(-1.0), 0.0, 0.0],
         }));
         // Unused previous buffers are bound to the executor's placeholder
         // (read-only bindings cannot alias the written ones).

@@ -48,7 +48,8 @@ fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         let eps = hp.epsilon.x;
         is_static = r.ok && e.x * e.x + e.y * e.y <= eps * eps;
         let j = cell(target_px, hp.sizes.z, hp.sizes.w, 1.0);
-        if is_static && j != NONE {
+        // A negative tolerance: no background, nothing to confirm.
+        if is_static && j != NONE && hp.epsilon.y >= 0.0 {
             var q = prev_positions[j];
             if q.w > 0.5 {
                 q = vec4<f32>(q.xyz + hp.prev.eye.xyz, q.w);
