@@ -30,22 +30,12 @@ async fn present_with(
     gpu: bool,
     adjust: impl FnOnce(&mut PresentConfig),
 ) -> client::present::Report {
-    present_at(30.0, method, seconds, gpu, adjust).await
+    present_at(WindowMode::Off, 30.0, method, seconds, gpu, adjust).await
 }
 
-/// [`present_with`] with the server rendering at `fps`.
+/// [`present_with`] with the server rendering at `fps` with its adaptive
+/// window in `mode`.
 async fn present_at(
-    fps: f64,
-    method: Method,
-    seconds: f64,
-    gpu: bool,
-    adjust: impl FnOnce(&mut PresentConfig),
-) -> client::present::Report {
-    present_windowed(WindowMode::Off, fps, method, seconds, gpu, adjust).await
-}
-
-/// [`present_at`] with the server's adaptive window in `mode`.
-async fn present_windowed(
     mode: WindowMode,
     fps: f64,
     method: Method,
@@ -151,7 +141,7 @@ async fn repeat_shows_only_rendered_and_repeated_frames() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_wgpu_backend_presents_generated_frames() {
     let seconds = 4.0;
-    let r = present_at(10.0, Method::Gffe, seconds, true, |_| {}).await;
+    let r = present_at(WindowMode::Off, 10.0, Method::Gffe, seconds, true, |_| {}).await;
     assert!(r.backend.starts_with("wgpu"), "{}", r.backend);
     assert!(
         r.summary.rendered >= 1 && r.summary.extrapolated >= 1,
@@ -239,7 +229,7 @@ async fn windowed_streams_are_presented_as_the_displayed_view() {
         let dir = tempfile::tempdir().unwrap();
         let dump = dir.path().join("presented");
         let target = dump.clone();
-        let r = present_windowed(mode, 30.0, Method::Gffe, 2.0, false, move |c| {
+        let r = present_at(mode, 30.0, Method::Gffe, 2.0, false, move |c| {
             c.dump_dir = Some(target);
         })
         .await;
