@@ -32,7 +32,9 @@ pub struct Policy {
 pub fn max_frame(size: FrameSize, window: &scene::render::WindowSettings) -> FrameSize {
     match window.mode {
         WindowMode::KeepDensity => {
-            let grow = |v: u32| (f64::from(v) * window.max_extent.max(1.0)).ceil() as u32 + 1;
+            let grow = |v: u32| {
+                ((f64::from(v) * window.max_extent.max(1.0)).ceil() as u32).saturating_add(1)
+            };
             FrameSize::new(grow(size.width), grow(size.height))
         }
         WindowMode::Off | WindowMode::KeepSize => size,
