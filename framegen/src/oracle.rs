@@ -25,7 +25,7 @@ use crate::output::{Output, Pixel, WARPED};
 use crate::passes::common::camera::pixel_center;
 use crate::passes::common::pushpull;
 use crate::passes::common::resample::{Resample, Source, resample, same_surface};
-use crate::passes::common::sample::clamp_index;
+use crate::passes::common::sample::{clamp_index, inside};
 
 /// The skipped frame `truth` (its motion pointing to `rendered`) made from
 /// `rendered` with true geometry; `alpha` is recorded as given.
@@ -58,9 +58,8 @@ pub fn backward_warp(
         let d = dst.depth[t];
         let m = Vec2::from_array(dst.motion[t]);
         let at = pixel_center(t, w) + m;
-        let inside = at.x >= 0.0 && at.y >= 0.0 && at.x < w as f32 && at.y < h as f32;
         let own = clamp_index(at, w, h);
-        if !inside || !same_surface(src.depth[own], d) {
+        if !inside(at, (w, h)) || !same_surface(src.depth[own], d) {
             return Pixel::EMPTY;
         }
         let c = resample(source, own, at, filter);
@@ -73,10 +72,8 @@ pub fn backward_warp(
     });
     pushpull::fill(&mut out, pushpull_levels);
     // The true geometry wherever the fill left its own.
-    for t in 0..out.depth.len() {
-        out.depth[t] = dst.depth[t];
-        out.motion[t] = dst.motion[t];
-    }
+    out.depth.copy_from_slice(&dst.depth);
+    out.motion.copy_from_slice(&dst.motion);
     let mut meta = truth.meta;
     meta.cut = false;
     Ok(finish(meta, alpha, out))

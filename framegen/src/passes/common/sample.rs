@@ -10,6 +10,12 @@ pub fn clamp_index(p: Vec2, w: u32, h: u32) -> usize {
     (y * w + x) as usize
 }
 
+/// Whether continuous position `p` lies inside a `w × h` image.
+#[inline]
+pub fn inside(p: Vec2, (w, h): (u32, u32)) -> bool {
+    p.x >= 0.0 && p.y >= 0.0 && p.x < w as f32 && p.y < h as f32
+}
+
 /// Bilinear sample of `image` at continuous position `p` (pixel centres at
 /// `i + 0.5`), edges clamped.
 pub fn bilinear(image: &[[f32; 4]], w: u32, h: u32, p: Vec2) -> Vec4 {

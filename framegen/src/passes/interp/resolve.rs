@@ -26,7 +26,7 @@ use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{Output, WARPED};
 use crate::passes::common::camera::pixel_center;
 use crate::passes::common::resample::{self, Resample, Source, same_surface};
-use crate::passes::common::sample::clamp_index;
+use crate::passes::common::sample::{clamp_index, inside};
 
 /// Where a pixel's colour comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -37,12 +37,6 @@ pub enum Fetch {
     Current(Vec2),
     /// The previous frame only, at the position.
     Previous(Vec2),
-}
-
-/// Whether continuous position `p` lies inside a `w × h` image.
-#[inline]
-fn inside(p: Vec2, (w, h): (u32, u32)) -> bool {
-    p.x >= 0.0 && p.y >= 0.0 && p.x < w as f32 && p.y < h as f32
 }
 
 /// What pixel centre `center` fetches, with motion `m` (pixels, current →
