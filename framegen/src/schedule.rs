@@ -19,8 +19,11 @@
 //! * **Interpolate** (GeoMotionGen, adds latency): rendered frame t+1 is
 //!   held back until the frames between t and t+1 have been shown; a slot
 //!   never waits on the network (a missing t+1 holds t). Exactly one frame
-//!   is held back: a backlog beyond that is dropped, so the added latency
-//!   stays one render interval.
+//!   is held back: a backlog beyond that is dropped. A rendered frame is
+//!   shown n vsyncs after the first one after it is ready (t+1 ready just
+//!   after t was shown: the minimum) or one render interval (t+1 ready
+//!   before t was shown), so with the presenter's one-vsync queue its
+//!   latency is at least one render interval (ExtraNet §3.1).
 //! * **Repeat**: the newest ready frame, again and again (the baseline).
 //!
 //! Frames that become ready but are never shown are counted as drops by
@@ -160,7 +163,16 @@ pub struct Scheduler {
     highest_ready: Option<u64>,
     next_display: u64,
     drops: Drops,
+    /// Interpolation: consecutive rendered frames ready more than a vsync
+    /// before the first slot between them and the frame before.
+    lagging: u32,
 }
+
+/// Interpolation catches up a vsync once this many consecutive rendered
+/// frames were ready more than a vsync before they were needed: a steady
+/// lag, not one frame that arrived early (jitter), which would then cost a
+/// hold.
+pub const CATCH_UP_AFTER: u32 = 4;
 
 impl Scheduler {
     /// A scheduler with `config`.
@@ -172,6 +184,7 @@ impl Scheduler {
             highest_ready: None,
             next_display: 0,
             drops: Drops::default(),
+            lagging: 0,
         }
     }
 
@@ -243,13 +256,45 @@ impl Scheduler {
 
     /// Interpolation holds back exactly one frame: when more are pending
     /// (the stream got ahead, e.g. at start-up), the older ones are dropped
-    /// (counted) so the added latency stays one render interval instead of
-    /// growing by a whole interval per backlogged frame.
+    /// (counted) so the added latency stays within one render interval
+    /// instead of growing by a whole interval per backlogged frame.
     fn trim_backlog(&mut self) {
         while self.pending.len() > 2 {
             self.pending.pop_front();
             self.drops.scheduler += 1;
         }
+    }
+
+    /// When the rendered frame `frame`, shown at `now`, counts as shown for
+    /// the α of the slots after it: `now`, or a vsync earlier to catch up.
+    ///
+    /// An interpolating display needs a frame when the first slot between
+    /// it and the one before comes up, `render − display interval` before
+    /// the frame itself is due; the frame's *margin* is how long before
+    /// that slot it was ready. Where the stream's phase leaves more than a
+    /// vsync of margin (frame t+1 ready before t was shown, as after
+    /// start-up, where the presenter waits for two frames), that vsync is
+    /// latency for nothing, for as long as the phase lasts. After
+    /// [`CATCH_UP_AFTER`] frames in a row with a margin of a vsync and a
+    /// quarter, the scheduler advances the animation by one vsync: the next
+    /// frame is due a vsync earlier (one slot between is skipped, an
+    /// animation step of one vsync once), and every later frame is shown a
+    /// vsync sooner with a quarter vsync of margin left for jitter.
+    fn catch_up(&mut self, frame: &FrameReady, now: Duration) -> Duration {
+        let di = self.config.display_interval.as_secs_f64();
+        let ri = self.config.render_interval.as_secs_f64();
+        let waited = now.saturating_sub(frame.ready_at).as_secs_f64();
+        let margin = waited - (ri - di);
+        if margin >= 1.25 * di {
+            self.lagging += 1;
+        } else {
+            self.lagging = 0;
+        }
+        if self.lagging < CATCH_UP_AFTER {
+            return now;
+        }
+        self.lagging = 0;
+        now.saturating_sub(self.config.display_interval)
     }
 
     fn interpolate(
@@ -275,7 +320,8 @@ impl Scheduler {
             Some(_) if due => {
                 self.trim_backlog();
                 let next = self.pending.pop_front()?;
-                self.shown = Some((next, now));
+                let at = self.catch_up(&next, now);
+                self.shown = Some((next, at));
                 Some((SlotKind::Rendered, next, None, 0.0))
             }
             Some(next) => Some((SlotKind::Interpolated, current, Some(next), alpha)),
@@ -303,6 +349,19 @@ mod tests {
     /// A 30 fps source whose frame k is ready at 33k + offset ms, a
     /// display at 60 Hz (vsync every 16.667 ms), run for `vsyncs` slots.
     fn run(policy: Policy, offset: u64, vsyncs: u64, skip: &[u64]) -> (Vec<Slot>, Drops) {
+        run_with(policy, vsyncs, |k| {
+            let ready = (k as f64 * 1000.0 / 30.0) as u64 + offset;
+            (!skip.contains(&k)).then_some(ready)
+        })
+    }
+
+    /// [`run`] with frame k ready at `ready(k)` ms (`None`: never sent);
+    /// ready times must increase.
+    fn run_with(
+        policy: Policy,
+        vsyncs: u64,
+        ready: impl Fn(u64) -> Option<u64>,
+    ) -> (Vec<Slot>, Drops) {
         let config = ScheduleConfig {
             max_alpha: 1.5,
             ..ScheduleConfig::multiple(policy, 30.0, 1)
@@ -311,14 +370,13 @@ mod tests {
         let di = config.display_interval;
         let mut slots = Vec::new();
         let mut next_frame = 0u64;
+        // A skipped frame is due when the one after it would be.
+        let due = |k: u64| (k..).find_map(&ready).unwrap_or(u64::MAX);
         for v in 0..vsyncs {
             let now = di * v as u32;
-            while frame(next_frame, 0).sim_time * 1000.0 + offset as f64
-                <= now.as_secs_f64() * 1000.0
-            {
-                let ready = (next_frame as f64 * 1000.0 / 30.0) as u64 + offset;
-                if !skip.contains(&next_frame) {
-                    s.frame_ready(frame(next_frame, ready));
+            while due(next_frame) as f64 <= now.as_secs_f64() * 1000.0 {
+                if let Some(at) = ready(next_frame) {
+                    s.frame_ready(frame(next_frame, at));
                 }
                 next_frame += 1;
             }
@@ -366,23 +424,44 @@ mod tests {
         }
     }
 
-    #[test]
-    fn interpolation_adds_at_least_one_render_interval() {
-        let (slots, drops) = run(Policy::Interpolate, 3, 90, &[]);
-        let ri = Duration::from_secs_f64(1.0 / 30.0);
-        let rendered: Vec<_> = slots
+    /// How long each rendered slot's frame waited after it was ready.
+    fn waits(slots: &[Slot]) -> Vec<(u64, Duration)> {
+        slots
             .iter()
             .filter(|s| s.kind == SlotKind::Rendered)
-            .collect();
-        assert!(rendered.len() >= 40);
-        for s in &rendered {
-            let wait = s.vsync - s.source.ready_at;
-            assert!(
-                wait + Duration::from_millis(1) >= ri,
-                "frame {} waited only {wait:?}",
-                s.source.id
-            );
+            .map(|s| (s.source.id, s.vsync - s.source.ready_at))
+            .collect()
+    }
+
+    /// Interpolation holds each rendered frame back by the slot between
+    /// frames (ExtraNet §3.1). Frames ready 3 ms after a vsync, 30 -> 60:
+    /// start-up (the older of the first two ready is shown) locks into a
+    /// phase a vsync later than needed, a render interval; the scheduler
+    /// catches up once after `CATCH_UP_AFTER` frames, skipping one slot
+    /// between, and holds every later frame one vsync.
+    #[test]
+    fn interpolation_holds_frames_back_by_the_slots_between() {
+        let (slots, drops) = run(Policy::Interpolate, 3, 90, &[]);
+        let ri = Duration::from_secs_f64(1.0 / 30.0);
+        let di = ri / 2;
+        let tick = Duration::from_millis(1);
+        let waits = waits(&slots);
+        assert!(waits.len() >= 40);
+        let lagging = CATCH_UP_AFTER as usize;
+        for (i, &(id, wait)) in waits.iter().enumerate().skip(1) {
+            assert!(wait + tick >= di, "frame {id} waited only {wait:?}");
+            if i <= lagging {
+                assert!(wait + tick >= ri, "frame {id} waited {wait:?}");
+            } else {
+                assert!(wait < ri - tick, "frame {id} waited {wait:?}");
+            }
         }
+        // One skipped slot: two rendered slots in a row, once.
+        let skips = slots
+            .windows(2)
+            .filter(|w| w[0].kind == SlotKind::Rendered && w[1].kind == SlotKind::Rendered)
+            .count();
+        assert_eq!(skips, 1);
         let interpolated: Vec<_> = slots
             .iter()
             .filter(|s| s.kind == SlotKind::Interpolated)
@@ -395,6 +474,34 @@ mod tests {
         );
         assert!(interpolated.iter().all(|s| (s.alpha - 0.5).abs() < 0.01));
         assert_eq!(drops, Drops::default());
+    }
+
+    /// A frame that arrives early once (jitter) is not a lag: no slot is
+    /// skipped for it, and nothing changes afterwards.
+    #[test]
+    fn interpolation_does_not_catch_up_on_one_early_frame() {
+        let ready = |k: u64| (k as f64 * 1000.0 / 30.0) as u64 + 3;
+        let (steady, _) = run(Policy::Interpolate, 3, 90, &[]);
+        // Frame 30 comes 10 ms early: before the vsync its predecessor is
+        // shown at.
+        let (jittered, drops) = run_with(Policy::Interpolate, 90, |k| {
+            Some(ready(k) - if k == 30 { 10 } else { 0 })
+        });
+        assert_eq!(drops, Drops::default());
+        let kinds = |s: &[Slot]| s.iter().map(|s| (s.kind, s.source.id)).collect::<Vec<_>>();
+        assert_eq!(kinds(&steady), kinds(&jittered));
+    }
+
+    /// Frames that straddle a vsync (one just before, the next just after)
+    /// leave no margin for catching up: no slot is skipped, none held.
+    #[test]
+    fn interpolation_does_not_catch_up_without_margin() {
+        let (slots, drops) = run_with(Policy::Interpolate, 120, |k| {
+            Some((k as f64 * 1000.0 / 30.0) as u64 + 31 + 2 * (k % 2))
+        });
+        assert_eq!(drops, Drops::default());
+        let kinds: Vec<_> = slots.iter().map(|s| s.kind).collect();
+        assert!(kinds.windows(2).all(|w| w[0] != w[1]), "{kinds:?}");
     }
 
     #[test]

@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use client::present::{PresentConfig, run_headless};
 use framegen::Method;
+use framegen::accounting::Percentiles;
 use framegen::schedule::SlotKind;
 use protocol::FrameSize;
 use protocol::wire::WindowMode;
@@ -157,11 +158,18 @@ async fn the_wgpu_backend_presents_generated_frames() {
 }
 
 /// Interpolation holds each rendered frame back until the frames between
-/// it and the one before are shown: a rendered frame is shown at least one
-/// render interval (two vsyncs at 30 -> 60) after a direct display would
-/// have shown it, and the slots between alternate with interpolated frames
-/// between it and a newer frame (the next one unless the stream dropped
-/// frames under load).
+/// it and the one before are shown (ExtraNet §3.1, DESIGN §8): a rendered
+/// frame that follows the frame interpolated towards it is shown a vsync
+/// after a direct display would have shown it, so its latency (present −
+/// ready, the presenter's one-vsync queue included) is a render interval
+/// or more; extrapolation's added latency is 0 in the median.
+///
+/// A frame ready just after t was shown is held one vsync (the least, at
+/// 30 -> 60); one ready before is held two, and the scheduler catches up
+/// from such a phase (its unit tests check both exactly on a fake clock).
+/// Here the bounds are medians: a presenter loop running late on this
+/// shared machine can take a frame into the slot of a vsync that passed
+/// before it was ready.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn interpolation_adds_at_least_one_render_interval() {
     let r = present(Method::Interp, 3.0, false).await;
@@ -172,15 +180,30 @@ async fn interpolation_adds_at_least_one_render_interval() {
         "{s:?}"
     );
     let interval = 1000.0 / 30.0;
-    // Holding back adds a render interval in steady state (the scheduler
-    // unit tests check it exactly on a fake clock). On a loaded machine
-    // frames arrive in bursts and the scheduler drops the backlog, so the
-    // next frame shown may have waited less: measured p50 33.3 ms on a calm
-    // machine and 16.7 ms on a loaded CI run, p95 ≥ 33.3 ms in both. The
-    // bounds: median at least one vsync, p95 at least one render interval
-    // (extrapolation's median is 0).
+    let vsync = 1000.0 / 60.0;
+    // The rendered frames shown after the frame interpolated towards them.
+    let held: Vec<_> = r
+        .records
+        .windows(2)
+        .filter(|w| {
+            w[1].kind == SlotKind::Rendered
+                && w[0].kind == SlotKind::Interpolated
+                && w[0].next == Some(w[1].source)
+        })
+        .map(|w| &w[1])
+        .collect();
     assert!(
-        s.added_latency_ms.p50 >= 1000.0 / 60.0 - 0.5 && s.added_latency_ms.p95 >= interval - 0.5,
+        held.len() >= s.rendered / 2,
+        "{} of {}",
+        held.len(),
+        s.rendered
+    );
+    let added = Percentiles::of(held.iter().filter_map(|x| x.added_latency_ms).collect());
+    let latency = Percentiles::of(held.iter().map(|x| x.latency_ms).collect());
+    assert!(added.p50 >= vsync - 0.5, "{added:?}");
+    assert!(latency.p50 >= interval - 0.5, "{latency:?}");
+    assert!(
+        s.added_latency_ms.p50 >= vsync - 0.5,
         "{:?}",
         s.added_latency_ms
     );
