@@ -102,11 +102,10 @@ pub const SAME_SURFACE_RATIO: f32 = 1.1;
 /// a surface; two skies agree, a sky and a point do not.)
 #[inline]
 pub fn same_surface(a: f32, b: f32) -> bool {
-    if a >= b {
-        b > 0.0 && a <= b * SAME_SURFACE_RATIO
-    } else {
-        a > 0.0 && b <= a * SAME_SURFACE_RATIO
-    }
+    // Selects and non-short-circuit `&`, no branches: the resampling
+    // filter asks this of 16 taps per pixel.
+    let (lo, hi) = if a >= b { (b, a) } else { (a, b) };
+    (lo > 0.0) & (hi <= lo * SAME_SURFACE_RATIO)
 }
 
 /// The source image a warp resamples.
@@ -191,9 +190,11 @@ pub fn resample(src: Source<'_>, own: usize, at: Vec2, mode: Resample) -> [f32; 
         return [fallback[0], fallback[1], fallback[2]];
     }
     if mode == Resample::CatmullRom {
-        let on = ys
-            .iter()
-            .all(|&y| xs.iter().all(|&x| same_surface(src.depth[y + x], d0)));
+        // Every tap, without early exits: most pixels lie inside a surface.
+        let on = ys.iter().fold(true, |on, &y| {
+            xs.iter()
+                .fold(on, |on, &x| on & same_surface(src.depth[y + x], d0))
+        });
         if on {
             // Separable: each row along x, then the rows along y.
             let (wx, wy) = (catmull_rom(f.x), catmull_rom(f.y));
