@@ -59,6 +59,10 @@ impl ConnectConfig {
 /// Why a session could not start or ended badly.
 #[derive(Debug, thiserror::Error)]
 pub enum ConnectError {
+    /// The access token is empty (no server accepts it; refused before
+    /// anything is sent).
+    #[error("the access token is empty")]
+    EmptyToken,
     /// The pin is unusable.
     #[error(transparent)]
     Pin(#[from] PinError),
@@ -149,6 +153,9 @@ fn protocol_err(e: impl std::fmt::Display) -> ConnectError {
 
 /// Connects, handshakes and starts receiving.
 pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
+    if config.token.is_empty() {
+        return Err(ConnectError::EmptyToken);
+    }
     let tls = config.pin.client_config()?;
     let crypto = quinn::crypto::rustls::QuicClientConfig::try_from(tls).map_err(protocol_err)?;
     let mut client_config = quinn::ClientConfig::new(Arc::new(crypto));

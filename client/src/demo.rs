@@ -83,7 +83,7 @@ fn start_local_from(
 ) -> anyhow::Result<LocalServer> {
     let identity_dir = tempfile::tempdir()?;
     let identity = Identity::load_or_create(identity_dir.path())?;
-    let token = format!("demo-{}", std::process::id());
+    let token = host::session::random_token();
     let buffers = StreamBuffer::default_set(Codec::Zstd).to_vec();
     let policy = Policy {
         token: token.clone(),

@@ -61,12 +61,16 @@ impl Pin {
                     .collect::<String>()
                     .to_lowercase();
                 let bad = || PinError::BadFingerprint(hex.clone());
-                if clean.len() != 64 {
+                // Digits only, checked before any pair is taken: a
+                // multi-byte character must not split (issue 18 §5).
+                let digits = clean.as_bytes();
+                if digits.len() != 64 || !digits.iter().all(u8::is_ascii_hexdigit) {
                     return Err(bad());
                 }
+                let nibble = |d: u8| (d as char).to_digit(16).unwrap_or(0) as u8;
                 let mut out = [0u8; 32];
-                for (i, byte) in out.iter_mut().enumerate() {
-                    *byte = u8::from_str_radix(&clean[2 * i..2 * i + 2], 16).map_err(|_| bad())?;
+                for (byte, pair) in out.iter_mut().zip(digits.chunks_exact(2)) {
+                    *byte = nibble(pair[0]) << 4 | nibble(pair[1]);
                 }
                 Ok(Some(out))
             }
@@ -176,6 +180,14 @@ mod tests {
         assert_eq!(Pin::Sha256(colons).digest().unwrap(), Some([0xab; 32]));
         assert!(Pin::Sha256("abc".into()).digest().is_err());
         assert!(Pin::Sha256("zz".repeat(32)).digest().is_err());
+        // 64 bytes of two-byte characters: an error, not a panic on a
+        // character boundary.
+        assert!(Pin::Sha256("é".repeat(32)).digest().is_err());
+        assert!(
+            Pin::Sha256(format!("{}é", "a".repeat(62)))
+                .digest()
+                .is_err()
+        );
         assert!(
             Pin::CertFile("/nonexistent/cert.der".into())
                 .digest()

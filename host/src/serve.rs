@@ -78,6 +78,12 @@ impl Server {
         policy: Policy,
         feed: Feed,
     ) -> std::io::Result<Self> {
+        if policy.token.is_empty() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "the access token is empty: it would admit no one (or, compared naively, anyone)",
+            ));
+        }
         let endpoint = quinn::Endpoint::server(config, addr)?;
         let counters = Arc::new(ServerCounters::default());
         let accept = tokio::spawn(accept_loop(

@@ -41,6 +41,14 @@ pub fn max_frame(size: FrameSize, window: &scene::render::WindowSettings) -> Fra
     }
 }
 
+/// A fresh access token: 128 random bits as 32 hex digits (`server serve`
+/// without `--token`, and the in-process demo).
+pub fn random_token() -> String {
+    use rand::Rng;
+    let bytes: [u8; 16] = rand::rng().random();
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// Compares two byte strings in time independent of where they differ.
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     let mut diff = a.len() ^ b.len();
@@ -64,7 +72,9 @@ pub fn answer(policy: &Policy, hello: &Hello, session_id: u64) -> Result<Welcome
             ),
         ));
     }
-    if !constant_time_eq(hello.token.as_bytes(), policy.token.as_bytes()) {
+    // An empty token authenticates no one, even against an empty policy.
+    if policy.token.is_empty() || !constant_time_eq(hello.token.as_bytes(), policy.token.as_bytes())
+    {
         return Err(reject(
             RejectReason::BadToken,
             "wrong or missing access token".into(),
@@ -194,6 +204,29 @@ mod tests {
             answer(&windowed, &h, 1).unwrap_err().reason,
             RejectReason::Incompatible
         );
+    }
+
+    /// A policy with an empty token welcomes no one, not even a hello
+    /// with an empty token (issue 18 §5); random tokens are 32 hex digits
+    /// and differ.
+    #[test]
+    fn an_empty_token_authenticates_no_one() {
+        let open = Policy {
+            token: String::new(),
+            ..policy()
+        };
+        let mut h = hello();
+        h.token = String::new();
+        assert_eq!(
+            answer(&open, &h, 1).unwrap_err().reason,
+            RejectReason::BadToken
+        );
+        let (a, b) = (random_token(), random_token());
+        assert!(
+            a.len() == 32 && a.bytes().all(|c| c.is_ascii_hexdigit()),
+            "{a}"
+        );
+        assert_ne!(a, b);
     }
 
     #[test]

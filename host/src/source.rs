@@ -290,7 +290,8 @@ impl Producer {
             let mut frame = self.frame(k)?;
             let encoded = encode_frame(&frame, buffers, protocol::codec::DEFAULT_ZSTD_LEVEL)?;
             // Host processing = render (or read) + encode, as a duration.
-            frame.meta.host_processing += started.elapsed();
+            frame.meta.host_processing =
+                frame.meta.host_processing.saturating_add(started.elapsed());
             let mut encoded = encoded;
             encoded.header.meta.host_processing = frame.meta.host_processing;
             let bytes = encoded.to_stream_bytes()?;

@@ -31,6 +31,18 @@ use crate::ValidationError;
 /// accepted (it is renormalised by [`Pose::normalized`]).
 pub const UNIT_QUAT_TOLERANCE: f64 = 1e-3;
 
+/// Largest |coordinate| of a camera position, world units: beyond it a
+/// camera-relative `f32` offset loses the precision a frame needs, and
+/// products of coordinates overflow towards `inf` (issue 18 §6).
+pub const MAX_COORDINATE: f64 = 1e12;
+
+/// Smallest vertical field of view, radians (about 0.06°): narrower, the
+/// projection's scale `1 / tan(fov/2)` makes any motion an overflow.
+pub const MIN_FOV_Y: f64 = 1e-3;
+
+/// Smallest near plane distance, world units.
+pub const MIN_NEAR: f64 = 1e-6;
+
 /// Largest |value| accepted in a window bound: a window 64× wider than the
 /// displayed region is already far beyond any useful widening.
 pub const MAX_WINDOW_EXTENT: f64 = 64.0;
@@ -134,13 +146,17 @@ impl Pose {
         DMat4::from_rotation_translation(self.rotation.normalize(), self.position).inverse()
     }
 
-    /// Checks that every value is finite and the rotation is a unit quaternion.
+    /// Checks that every value is finite, the position within
+    /// [`MAX_COORDINATE`] and the rotation a unit quaternion.
     pub fn validate(&self) -> Result<(), ValidationError> {
         if !self.position.is_finite() {
             return Err(ValidationError::NonFinite("camera position"));
         }
         if !self.rotation.is_finite() {
             return Err(ValidationError::NonFinite("camera rotation"));
+        }
+        if self.position.abs().max_element() > MAX_COORDINATE {
+            return Err(ValidationError::OutOfRange("camera position"));
         }
         let len = self.rotation.length();
         if (len - 1.0).abs() > UNIT_QUAT_TOLERANCE {
@@ -181,7 +197,9 @@ impl Projection {
         (self.fov_y * 0.5).tan()
     }
 
-    /// Checks ranges; `far` may be `+inf`, nothing else may be non-finite.
+    /// Checks ranges (field of view from [`MIN_FOV_Y`] to π, near plane
+    /// from [`MIN_NEAR`] to [`MAX_COORDINATE`]); `far` may be `+inf`,
+    /// nothing else may be non-finite.
     pub fn validate(&self) -> Result<(), ValidationError> {
         if !self.fov_y.is_finite() || !self.aspect.is_finite() || !self.near.is_finite() {
             return Err(ValidationError::NonFinite("projection"));
@@ -189,13 +207,13 @@ impl Projection {
         if self.far.is_nan() {
             return Err(ValidationError::NonFinite("projection far plane"));
         }
-        if !(self.fov_y > 0.0 && self.fov_y < std::f64::consts::PI - 1e-6) {
+        if !(self.fov_y >= MIN_FOV_Y && self.fov_y < std::f64::consts::PI - 1e-6) {
             return Err(ValidationError::OutOfRange("fov_y"));
         }
         if !(self.aspect > 1e-4 && self.aspect < 1e4) {
             return Err(ValidationError::OutOfRange("aspect"));
         }
-        if !(self.near > 0.0 && self.far > self.near) {
+        if !(self.near >= MIN_NEAR && self.near <= MAX_COORDINATE && self.far > self.near) {
             return Err(ValidationError::OutOfRange("near/far"));
         }
         Ok(())
@@ -767,6 +785,33 @@ mod tests {
         let px = DVec2::new((ndc.x + 1.0) * 0.5 * wide.0, (1.0 - ndc.y) * 0.5 * wide.1);
         assert!((px - b.pixel).length() < 1e-6, "{px:?} vs {:?}", b.pixel);
         assert!(ndc.z > 0.0 && ndc.z < 1.0);
+    }
+
+    /// Finite but absurd cameras (issue 18 §6) are out of range, with
+    /// the limits themselves accepted: a 1e-300 field of view, a position
+    /// at 1e13, a near plane at 1e-9 used to pass and end in NaN paths.
+    #[test]
+    fn validation_bounds_finite_extremes() {
+        let good = cam(DVec3::ZERO, DVec3::NEG_Z);
+        let range = |c: Camera| matches!(c.validate(), Err(ValidationError::OutOfRange(_)));
+        let mut c = good;
+        c.projection.fov_y = 1e-300;
+        assert!(range(c));
+        c.projection.fov_y = MIN_FOV_Y;
+        assert!(c.validate().is_ok());
+        let mut c = good;
+        c.pose.position = DVec3::new(0.0, -1e13, 0.0);
+        assert!(range(c));
+        c.pose.position = DVec3::splat(-MAX_COORDINATE);
+        assert!(c.validate().is_ok());
+        let mut c = good;
+        c.projection.near = 1e-9;
+        assert!(range(c));
+        c.projection.near = MIN_NEAR;
+        assert!(c.validate().is_ok());
+        c.projection.near = 1e13;
+        c.projection.far = f64::INFINITY;
+        assert!(range(c));
     }
 
     #[test]

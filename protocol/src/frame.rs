@@ -54,11 +54,26 @@ pub struct FrameMeta {
     pub cut: bool,
 }
 
+/// Largest |simulation time| of a frame, seconds (some 31 years): an `f64`
+/// time keeps sub-microsecond steps up to here.
+pub const MAX_TIME: f64 = 1e9;
+
+/// Longest host processing time a frame may report (a day: an offline
+/// render's time, with room for the encode added to it without overflow).
+pub const MAX_HOST_PROCESSING: Duration = Duration::from_secs(86_400);
+
 impl FrameMeta {
-    /// Checks the camera, the time and the size against `limits`.
+    /// Checks the camera, the time, the host processing time and the size
+    /// against `limits`.
     pub fn validate(&self, limits: &Limits) -> Result<(), ValidationError> {
         if !self.time.is_finite() {
             return Err(ValidationError::NonFinite("frame time"));
+        }
+        if self.time.abs() > MAX_TIME {
+            return Err(ValidationError::OutOfRange("frame time"));
+        }
+        if self.host_processing > MAX_HOST_PROCESSING {
+            return Err(ValidationError::OutOfRange("host processing time"));
         }
         limits.check_size(self.size.width, self.size.height)?;
         self.camera.validate()
@@ -513,6 +528,26 @@ pub(crate) mod tests {
                 }
             }
         }
+    }
+
+    /// A time or host processing time that arithmetic downstream cannot
+    /// take is out of range (a host processing time near `u64::MAX`
+    /// seconds used to pass and overflow the producer's `+=`).
+    #[test]
+    fn meta_validation_bounds_times() {
+        let limits = Limits::default();
+        let f = sample_frame(0, 4, 4);
+        let range =
+            |m: &FrameMeta| matches!(m.validate(&limits), Err(ValidationError::OutOfRange(_)));
+        let mut m = f.meta;
+        m.host_processing = Duration::from_secs(u64::MAX);
+        assert!(range(&m));
+        m.host_processing = MAX_HOST_PROCESSING;
+        assert!(m.validate(&limits).is_ok());
+        m.time = -1e10;
+        assert!(range(&m));
+        m.time = MAX_TIME;
+        assert!(m.validate(&limits).is_ok());
     }
 
     #[test]

@@ -384,3 +384,33 @@ fn special_files_are_refused_not_read_forever() {
         Err(DumpError::Io { .. })
     ));
 }
+
+/// A frame JSON whose host processing time is near `u64::MAX` seconds is
+/// a typed validation error when read (it used to pass and overflow the
+/// server's `+=` when the encode time was added).
+#[test]
+fn a_host_processing_overflow_is_a_typed_error() -> Result<(), Box<dyn std::error::Error>> {
+    let dir = tempfile::tempdir()?;
+    write_dump(dir.path(), 1);
+    let (_, json) = frame_paths(dir.path(), 0);
+    let mut meta: serde_json::Value = serde_json::from_slice(&fs::read(&json)?)?;
+    let processing = meta
+        .pointer_mut("/host_processing/secs")
+        .ok_or("no host_processing.secs in the frame JSON")?;
+    *processing = serde_json::Value::from(u64::MAX);
+    fs::write(&json, serde_json::to_vec(&meta)?)?;
+    let r = DumpReader::open(dir.path())?;
+    match r.read_frame(0) {
+        Err(DumpError::Invalid { source, .. }) => {
+            assert_eq!(
+                source,
+                protocol::ValidationError::OutOfRange("host processing time")
+            );
+        }
+        other => panic!(
+            "expected an invalid frame, got {:?}",
+            other.map(|f| f.meta.index)
+        ),
+    }
+    Ok(())
+}

@@ -374,11 +374,8 @@ struct ServeArgs {
 
 async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let identity = host::tls::Identity::load_or_create(&args.identity)?;
-    let token = args.token.unwrap_or_else(|| {
-        use rand::Rng;
-        let bytes: [u8; 16] = rand::rng().random();
-        bytes.iter().map(|b| format!("{b:02x}")).collect()
-    });
+    let token = args.token.unwrap_or_else(host::session::random_token);
+    anyhow::ensure!(!token.is_empty(), "--token must not be empty");
     let buffers = protocol::wire::StreamBuffer::default_set(args.color_codec).to_vec();
     let max_frame = host::session::max_frame(
         args.size,

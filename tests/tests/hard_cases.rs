@@ -22,6 +22,7 @@
 //! | 8 extrapolations in a row | [`a_chain_of_eight_extrapolations`] |
 //! | a 1×1 frame and an 8192×16 frame | [`tiny_and_extreme_aspect_frames`] |
 //! | α out of range, short buffers | [`bad_alpha_and_short_buffers`] |
+//! | a field of view of 1e-3 rad, the camera 1e12 out, near 1e-6, time 1e9 (the validation limits; beyond them a typed error) | [`cameras_and_times_at_the_validation_limits`] |
 
 use std::sync::Arc;
 
@@ -503,5 +504,60 @@ fn tiny_and_extreme_aspect_frames() {
                 generate_bounded(&mut g, &[1e-6, 1.0, 3.0], &what);
             }
         }
+    }
+}
+
+/// A stream at the limits validation admits (issue 18 §6): a field of view
+/// of `MIN_FOV_Y` radians, the camera `MAX_COORDINATE` out, a near plane at
+/// `MIN_NEAR`, times near `MAX_TIME`. The rendered buffers stay those of the
+/// default scene (they no longer match the camera, which is what a
+/// careless or hostile sender would do). Each frame is accepted, and every
+/// method stays bounded on both backends out to α = 3; one step beyond
+/// any limit is a typed error, not a frame.
+#[test]
+fn cameras_and_times_at_the_validation_limits() {
+    use protocol::ValidationError;
+    use protocol::camera::{MAX_COORDINATE, MIN_FOV_Y, MIN_NEAR};
+    use protocol::frame::MAX_TIME;
+    let ctx = ctx();
+    let fs = frames("default");
+    let at_limits: Vec<Frame> = fs
+        .iter()
+        .map(|f| {
+            let mut f = f.clone();
+            let c = &mut f.meta.camera;
+            c.projection.fov_y = MIN_FOV_Y;
+            c.projection.near = MIN_NEAR;
+            c.pose.position += DVec3::new(MAX_COORDINATE - 1e3, -(MAX_COORDINATE - 1e3), 0.0);
+            f.meta.time += MAX_TIME - 10.0;
+            f
+        })
+        .collect();
+    for method in Method::ALL {
+        for mut g in generators(&ctx, method) {
+            for f in &at_limits {
+                g.push(f).unwrap();
+            }
+            generate_bounded(&mut g, &[0.5, 1.0, 3.0], "at the limits");
+        }
+    }
+    let beyond = [
+        |f: &mut Frame| f.meta.camera.projection.fov_y = MIN_FOV_Y * 0.5,
+        |f: &mut Frame| f.meta.camera.projection.near = MIN_NEAR * 0.5,
+        |f: &mut Frame| f.meta.camera.pose.position.x = MAX_COORDINATE * 2.0,
+        |f: &mut Frame| f.meta.time = MAX_TIME * 2.0,
+    ];
+    for (i, spoil) in beyond.iter().enumerate() {
+        let mut f = at_limits[0].clone();
+        spoil(&mut f);
+        let mut g = FrameGenerator::cpu(Settings::default()).unwrap();
+        let err = g.push(&f).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                framegen::FramegenError::Frame(ValidationError::OutOfRange(_))
+            ),
+            "case {i}: {err}"
+        );
     }
 }

@@ -166,6 +166,33 @@ async fn wrong_token_pin_and_version_are_refused_with_the_reason() {
         Err(e) => panic!("expected a BadToken refusal, got {e}"),
         Ok(_) => panic!("expected a BadToken refusal, got a session"),
     }
+    // An empty token is refused before anything is sent (issue 18 §5).
+    let mut empty = fx.config();
+    empty.token = String::new();
+    assert!(matches!(
+        client::connect(empty).await,
+        Err(ConnectError::EmptyToken)
+    ));
+    // A server does not start with an empty token.
+    let open = Policy {
+        token: String::new(),
+        server_name: "open".into(),
+        size: SIZE,
+        max_frame: SIZE,
+        fps: REPLAY_FPS,
+        buffers: fx.buffers.clone(),
+        window_mode: WindowMode::Off,
+    };
+    let started = Server::start(
+        "127.0.0.1:0".parse().unwrap(),
+        fx.identity.quic_server_config().unwrap(),
+        open,
+        Feed::Live(Source::channel()),
+    );
+    assert_eq!(
+        started.err().map(|e| e.kind()),
+        Some(std::io::ErrorKind::InvalidInput)
+    );
     let mut bad_pin = fx.config();
     bad_pin.pin = Pin::Sha256("00".repeat(32));
     match client::connect(bad_pin).await {

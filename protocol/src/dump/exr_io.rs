@@ -40,6 +40,14 @@ pub fn channel_names(kind: BufferKind) -> &'static [&'static str] {
     }
 }
 
+/// Most channels an EXR read as a frame may have. A dump frame has at most
+/// 13 (every [`channel_names`]); a Blender multilayer render with every
+/// pass the importer reads, some 40. The `exr` decoder allocates every
+/// channel of a layer before it returns, so a crafted header with a
+/// thousand channels would cost a thousand frame-sized planes: it is
+/// refused from the header (issue 18 §4).
+pub const MAX_EXR_CHANNELS: usize = 64;
+
 /// Detail of the error reported when the `exr` decoder panics.
 pub const PANIC_DETAIL: &str = "decoder panicked on this file";
 
@@ -147,8 +155,9 @@ impl ExrPlanes {
 }
 
 /// Reads every channel of the first layer of `path` as `f32`. The header is
-/// checked first: the layer must be `size` and hold every `required` channel
-/// before any pixel is decoded, so a wrong or hostile file costs no
+/// checked first: the layer must be `size`, have at most
+/// [`MAX_EXR_CHANNELS`] channels and hold every `required` channel before
+/// any pixel is decoded, so a wrong or hostile file costs no
 /// allocation of its claimed size.
 pub(crate) fn read_planes(
     path: &Path,
@@ -181,6 +190,14 @@ pub(crate) fn read_planes(
     }
     if header.deep {
         return Err(DumpError::exr_msg(path, "deep data is not a frame"));
+    }
+    let count = header.channels.list.len();
+    if count > MAX_EXR_CHANNELS {
+        return Err(DumpError::TooManyChannels {
+            path: path.to_owned(),
+            count,
+            max: MAX_EXR_CHANNELS,
+        });
     }
     for name in required {
         if !header
@@ -293,4 +310,39 @@ pub(crate) fn mask_bytes(plane: &[f32]) -> Vec<u8> {
         .iter()
         .map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8)
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An EXR whose header lists a thousand channels (each a frame-sized
+    /// plane the decoder would allocate) is refused from the header with a
+    /// typed error (issue 18 §4), whatever the caller requires.
+    #[test]
+    fn a_channel_bomb_is_refused_from_its_header() -> Result<(), Box<dyn std::error::Error>> {
+        let dir = tempfile::tempdir()?;
+        let path = dir.path().join("bomb.exr");
+        let size = FrameSize::new(33, 19);
+        let names: Vec<String> = (0..1000).map(|i| format!("c{i:04}")).collect();
+        let planes = names
+            .iter()
+            .map(|name| PlaneOut {
+                name,
+                values: vec![0.0; size.pixels() as usize],
+                half: true,
+            })
+            .collect();
+        write_planes(&path, size, planes)?;
+        for required in [&[][..], &["R", "G", "B"][..]] {
+            match read_planes(&path, size, required) {
+                Err(DumpError::TooManyChannels { count, max, .. }) => {
+                    assert_eq!((count, max), (1000, MAX_EXR_CHANNELS));
+                }
+                Err(e) => panic!("expected TooManyChannels, got {e}"),
+                Ok(_) => panic!("expected TooManyChannels, got planes"),
+            }
+        }
+        Ok(())
+    }
 }

@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-pub use exr_io::{PANIC_DETAIL, channel_names, read_exr, write_exr};
+pub use exr_io::{MAX_EXR_CHANNELS, PANIC_DETAIL, channel_names, read_exr, write_exr};
 pub(crate) use exr_io::{PlaneOut, mask_bytes, read_planes, rgb_pixel, write_planes};
 
 use crate::frame::{Frame, FrameMeta, FrameSize};
@@ -205,6 +205,16 @@ pub enum DumpError {
         expected: FrameSize,
         /// In the file.
         got: FrameSize,
+    },
+    /// An EXR header lists more channels than any frame can need.
+    #[error("{path}: {count} channels, more than the {max} a frame may have")]
+    TooManyChannels {
+        /// The file.
+        path: PathBuf,
+        /// Channels in its header.
+        count: usize,
+        /// The limit ([`MAX_EXR_CHANNELS`]).
+        max: usize,
     },
     /// A required channel is absent.
     #[error("{path}: channel {channel:?} is missing")]
