@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use protocol::Limits;
-use protocol::wire::{self, Decoder, Hello, Message, Pong, ServerStats};
+use protocol::wire::{self, Decoder, Hello, Message, MessageKind, Pong, ServerStats};
 use tokio::sync::{Semaphore, broadcast};
 
 use crate::session::{self, Policy};
@@ -157,27 +157,36 @@ async fn connection(
     feed: &Feed,
     counters: &ServerCounters,
 ) -> anyhow::Result<()> {
-    let conn = incoming.await?;
+    // The timeout covers the TLS handshake too: a peer that stalls it
+    // holds no slot longer than one that never says hello.
+    let mut connected = None;
     let handshake = async {
+        let conn = incoming.await?;
+        connected = Some(conn.clone());
         let (send, mut recv) = conn.accept_bi().await?;
-        let mut decoder = Decoder::new(Limits::default());
+        // Nothing but a Hello, refused from its header otherwise, and no
+        // control message above a few KiB, before and after authentication.
+        let mut decoder = Decoder::accepting(Limits::control(), &[MessageKind::Hello]);
         let hello = match read_message(&mut recv, &mut decoder).await {
             Ok(Some(Message::Hello(h))) => Ok(h),
             Ok(Some(other)) => Err(anyhow::anyhow!("expected Hello, got {:?}", other.kind())),
             Ok(None) => Err(anyhow::anyhow!("control stream ended before Hello")),
             Err(e) => Err(e),
         };
-        anyhow::Ok((send, recv, decoder, hello))
+        anyhow::Ok((conn, send, recv, decoder, hello))
     };
-    let (mut send, recv, decoder, hello) =
+    let (conn, mut send, recv, mut decoder, hello) =
         match tokio::time::timeout(HELLO_TIMEOUT, handshake).await {
             Ok(r) => r?,
             Err(_) => {
                 counters.refused.fetch_add(1, Ordering::Relaxed);
-                conn.close(close_code::PROTOCOL.into(), b"no hello in time");
+                if let Some(conn) = connected {
+                    conn.close(close_code::PROTOCOL.into(), b"no hello in time");
+                }
                 anyhow::bail!("no hello within {HELLO_TIMEOUT:?}");
             }
         };
+    decoder.accept_only(&[MessageKind::ClientStats, MessageKind::Bye]);
     let hello: Hello = match hello {
         Ok(h) => h,
         Err(e) => {

@@ -94,17 +94,27 @@ impl Identity {
             .map_err(|e| TlsError::Quic(e.to_string()))?;
         let mut config = quinn::ServerConfig::with_crypto(Arc::new(crypto));
         let mut transport = quinn::TransportConfig::default();
-        // Frames are large: let a few be in flight at once.
+        // What a client may send: its control stream and nothing else
+        // (frames flow the other way, on streams the server opens under the
+        // client's limits), with receive windows sized for control messages
+        // and input datagrams, not frames (issue 18 §2).
         transport
-            .max_concurrent_uni_streams(64u32.into())
-            .stream_receive_window((64u32 << 20).into())
-            .receive_window((256u32 << 20).into())
+            .max_concurrent_uni_streams(0u32.into())
+            .max_concurrent_bidi_streams(1u32.into())
+            .stream_receive_window(CONTROL_WINDOW.into())
+            .receive_window((4 * CONTROL_WINDOW).into())
+            .datagram_receive_buffer_size(Some(CONTROL_WINDOW as usize))
+            // Frames are large: let a few be in flight at once.
             .send_window(256 << 20)
             .keep_alive_interval(Some(std::time::Duration::from_secs(2)));
         config.transport_config(Arc::new(transport));
         Ok(config)
     }
 }
+
+/// The server's receive window per stream, bytes: a few control messages
+/// (each at most `Limits::MAX_CONTROL_STREAM`).
+pub const CONTROL_WINDOW: u32 = 64 * 1024;
 
 /// SHA-256 of a certificate's DER, lowercase hex.
 pub fn fingerprint(cert: &CertificateDer<'_>) -> String {

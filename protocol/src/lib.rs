@@ -124,6 +124,20 @@ impl Limits {
     /// Width and height up to 8192 each.
     pub const MAX_DIMENSION: u32 = 8192;
 
+    /// The limits of a control stream (handshake, statistics, bye): control
+    /// messages up to [`Limits::MAX_CONTROL_STREAM`] bytes, no payloads.
+    pub fn control() -> Self {
+        Self {
+            max_payload: 0,
+            max_control: Self::MAX_CONTROL_STREAM,
+            ..Self::default()
+        }
+    }
+
+    /// Largest control-stream message body: a `Hello` with a long name,
+    /// token and every option is a few hundred bytes.
+    pub const MAX_CONTROL_STREAM: u32 = 4 * 1024;
+
     /// Checks that a frame size is within `1..=max_dimension` on both sides.
     pub fn check_size(&self, width: u32, height: u32) -> Result<(), ValidationError> {
         if width == 0 || height == 0 || width > self.max_dimension || height > self.max_dimension {

@@ -219,3 +219,44 @@ fn a_failed_decoder_stays_failed_and_buffers_nothing_more() {
     assert_eq!(d.buffered(), 0, "bytes after the failure are not kept");
     assert!(matches!(d.next_message(), Err(WireError::Poisoned)));
 }
+
+/// A decoder that expects certain kinds refuses any other from its 8-byte
+/// header, before a byte of its body is buffered, and the control limits
+/// refuse a control message above a few KiB (issue 18 §1).
+#[test]
+fn unexpected_kinds_are_refused_from_the_header() -> Result<(), WireError> {
+    let bye = encode(&Message::Bye(Bye {
+        reason: "done".into(),
+    }))?;
+    let mut d = Decoder::accepting(Limits::control(), &[MessageKind::Hello]);
+    d.feed(&bye[..HEADER_LEN]);
+    match d.next_message() {
+        Err(WireError::UnexpectedKind { got, expected }) => {
+            assert_eq!(got, MessageKind::Bye);
+            assert_eq!(expected, &[MessageKind::Hello]);
+        }
+        other => panic!("expected UnexpectedKind, got {other:?}"),
+    }
+    assert_eq!(d.buffered(), 0);
+    // Expected kinds pass; the set can change between messages.
+    let mut d = Decoder::accepting(Limits::control(), &[MessageKind::Bye]);
+    d.feed(&bye);
+    d.feed(&bye);
+    assert!(matches!(d.next_message()?, Some(Message::Bye(_))));
+    d.accept_only(&[MessageKind::ClientStats]);
+    assert!(matches!(
+        d.next_message(),
+        Err(WireError::UnexpectedKind {
+            got: MessageKind::Bye,
+            ..
+        })
+    ));
+    // A Bye of 5 KiB is too long for a control stream.
+    let long = encode(&Message::Bye(Bye {
+        reason: "x".repeat(5 * 1024),
+    }))?;
+    let mut d = Decoder::new(Limits::control());
+    d.feed(&long[..HEADER_LEN]);
+    assert!(matches!(d.next_message(), Err(WireError::TooLong { .. })));
+    Ok(())
+}

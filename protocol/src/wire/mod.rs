@@ -191,6 +191,15 @@ pub enum WireError {
         /// Why.
         detail: String,
     },
+    /// A kind this stream does not carry at this point (refused from the
+    /// header, before any of its body is buffered).
+    #[error("unexpected {got:?} (this stream carries {expected:?} here)")]
+    UnexpectedKind {
+        /// The kind in the header.
+        got: MessageKind,
+        /// The kinds accepted.
+        expected: &'static [MessageKind],
+    },
     /// A previous error left the stream in an unknown state.
     #[error("decoder already failed; the stream must be closed")]
     Poisoned,
@@ -399,6 +408,8 @@ pub struct Decoder {
     pos: usize,
     /// The validated header of the message being received.
     pending: Option<(MessageKind, usize)>,
+    /// The kinds accepted; any kind when `None`.
+    expected: Option<&'static [MessageKind]>,
     failed: bool,
 }
 
@@ -410,8 +421,24 @@ impl Decoder {
             buf: Vec::new(),
             pos: 0,
             pending: None,
+            expected: None,
             failed: false,
         }
+    }
+
+    /// From the next header on, accept only `kinds`: any other is a
+    /// [`WireError::UnexpectedKind`] from its 8-byte header alone, before
+    /// a byte of its body is buffered (a server waiting for a `Hello`
+    /// never holds a payload-sized body from an unauthenticated peer).
+    pub fn accept_only(&mut self, kinds: &'static [MessageKind]) {
+        self.expected = Some(kinds);
+    }
+
+    /// [`Decoder::new`] accepting only `kinds` ([`Decoder::accept_only`]).
+    pub fn accepting(limits: Limits, kinds: &'static [MessageKind]) -> Self {
+        let mut d = Self::new(limits);
+        d.accept_only(kinds);
+        d
     }
 
     /// Appends bytes received from the transport.
@@ -449,6 +476,11 @@ impl Decoder {
                     return Ok(None);
                 };
                 let p = parse_header(header, &self.limits)?;
+                if let Some(expected) = self.expected
+                    && !expected.contains(&p.0)
+                {
+                    return Err(WireError::UnexpectedKind { got: p.0, expected });
+                }
                 self.pending = Some(p);
                 p
             }
