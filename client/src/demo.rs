@@ -93,6 +93,7 @@ fn start_local_from(
         fps,
         buffers: buffers.clone(),
         window_mode: window.mode,
+        max_sessions: host::session::DEFAULT_MAX_SESSIONS,
     };
     let frames = Source::channel();
     let source = Source::start(spec, buffers, frames.clone())?;

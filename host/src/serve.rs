@@ -22,6 +22,13 @@ use crate::source::Feed;
 
 /// Most frame streams one client may have open at once.
 pub const MAX_IN_FLIGHT: usize = 3;
+/// Connections a server holds at once, sessions and handshakes together,
+/// for a cap of `max_sessions` sessions: one more is refused at the QUIC
+/// level, before any TLS work.
+pub fn max_connections(max_sessions: usize) -> usize {
+    max_sessions.saturating_mul(2).saturating_add(16)
+}
+
 /// How long a client has to send its hello.
 pub const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -120,18 +127,50 @@ async fn accept_loop(
     counters: Arc<ServerCounters>,
 ) {
     let mut next_session = 1u64;
+    let connections = Arc::new(Semaphore::new(max_connections(policy.max_sessions)));
+    let sessions = Arc::new(Semaphore::new(policy.max_sessions));
     while let Some(incoming) = endpoint.accept().await {
+        // Address validation: a client whose address is not validated yet
+        // is asked to retry with a token, so a spoofed source address makes
+        // the server do no handshake work.
+        if !incoming.remote_address_validated() && incoming.may_retry() {
+            if let Err(e) = incoming.retry() {
+                tracing::debug!("retry not sent: {e}");
+            }
+            continue;
+        }
+        let Ok(slot) = connections.clone().try_acquire_owned() else {
+            counters.refused.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!(peer = %incoming.remote_address(), "connection refused: too many connections");
+            incoming.refuse();
+            continue;
+        };
         let (policy, feed, counters) = (policy.clone(), feed.clone(), counters.clone());
+        let sessions = sessions.clone();
         let session_id = next_session;
         next_session += 1;
         tokio::spawn(async move {
+            let _slot = slot;
             let peer = incoming.remote_address();
-            match connection(incoming, &policy, session_id, &feed, &counters).await {
+            let caps = Caps {
+                policy: &policy,
+                sessions,
+                counters: &counters,
+            };
+            match connection(incoming, caps, session_id, &feed).await {
                 Ok(()) => tracing::info!(session_id, %peer, "session ended"),
                 Err(e) => tracing::warn!(session_id, %peer, "session failed: {e:#}"),
             }
         });
     }
+}
+
+/// What a connection is admitted under: the policy, the session slots and
+/// the counters it reports to.
+struct Caps<'a> {
+    policy: &'a Policy,
+    sessions: Arc<Semaphore>,
+    counters: &'a ServerCounters,
 }
 
 /// Reads one message from a stream with a decoder, within `limits`.
@@ -152,11 +191,15 @@ async fn read_message(
 
 async fn connection(
     incoming: quinn::Incoming,
-    policy: &Policy,
+    caps: Caps<'_>,
     session_id: u64,
     feed: &Feed,
-    counters: &ServerCounters,
 ) -> anyhow::Result<()> {
+    let Caps {
+        policy,
+        sessions,
+        counters,
+    } = caps;
     // The timeout covers the TLS handshake too: a peer that stalls it
     // holds no slot longer than one that never says hello.
     let mut connected = None;
@@ -210,7 +253,15 @@ async fn connection(
             anyhow::bail!(reason);
         }
     };
-    let welcome = match session::answer(policy, &hello, session_id) {
+    // An authenticated client beyond the session cap is told so.
+    let admitted = session::answer(policy, &hello, session_id).and_then(|w| {
+        let slot = sessions.try_acquire_owned().map_err(|_| wire::Reject {
+            reason: wire::RejectReason::ServerFull,
+            message: format!("the server serves {} sessions at most", policy.max_sessions),
+        })?;
+        Ok((w, slot))
+    });
+    let (welcome, _session_slot) = match admitted {
         Ok(w) => w,
         Err(reject) => {
             counters.refused.fetch_add(1, Ordering::Relaxed);
@@ -227,9 +278,21 @@ async fn connection(
     tracing::info!(session_id, client = %hello.client_name, "session started");
     // Subscribed before the welcome, so a live stream loses nothing after
     // it; a per-session source starts here and stops with the session.
-    let (mut rx, _source) = feed.subscribe()?;
+    // A per-session source opens its dump and starts its (paused)
+    // producer thread off the runtime, and is stopped and joined off it at
+    // the end.
+    let (mut rx, source) = {
+        let feed = feed.clone();
+        tokio::task::spawn_blocking(move || feed.subscribe()).await??
+    };
+    let mut source = JoinedOffRuntime(source);
     send.write_all(&wire::encode(&Message::Welcome(welcome))?)
         .await?;
+    // A per-session replay paces from here, not from before the welcome:
+    // its first frames do not pile up while the client is still reading it.
+    if let Some(s) = source.0.as_mut() {
+        s.resume();
+    }
 
     let client = Arc::new(ClientCounters::default());
     let control = tokio::spawn(control_loop(
@@ -303,6 +366,24 @@ async fn connection(
     control.abort();
     datagrams.abort();
     result
+}
+
+/// A per-session source, stopped and joined on a blocking thread when the
+/// session ends however it ends (its drop waits for the frame being read
+/// or rendered, which must not hold a runtime worker).
+struct JoinedOffRuntime(Option<crate::source::Source>);
+
+impl Drop for JoinedOffRuntime {
+    fn drop(&mut self) {
+        if let Some(source) = self.0.take() {
+            match tokio::runtime::Handle::try_current() {
+                Ok(runtime) => {
+                    runtime.spawn_blocking(move || drop(source));
+                }
+                Err(_) => drop(source),
+            }
+        }
+    }
 }
 
 /// Sends [`ServerStats`] every second and reads the client's messages.

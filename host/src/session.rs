@@ -24,7 +24,15 @@ pub struct Policy {
     pub buffers: Vec<StreamBuffer>,
     /// Window mode of the stream.
     pub window_mode: WindowMode,
+    /// Most sessions served at once; one more is refused with
+    /// [`RejectReason::ServerFull`].
+    pub max_sessions: usize,
 }
+
+/// Sessions a server admits by default: a live scene is rendered once for
+/// all of them, but each replayed dump is read and encoded per session, two
+/// cores' worth at 640×360 (`serve --max-sessions`).
+pub const DEFAULT_MAX_SESSIONS: usize = 16;
 
 /// The largest frame a stream of displayed `size` sends with `window`: a
 /// widened window at the same pixel density (keep-density) grows each side
@@ -139,6 +147,7 @@ mod tests {
             fps: 30.0,
             buffers: StreamBuffer::default_set(Codec::Raw).to_vec(),
             window_mode: WindowMode::Off,
+            max_sessions: DEFAULT_MAX_SESSIONS,
         }
     }
 

@@ -73,6 +73,8 @@ pub struct Source {
     /// Counters.
     pub stats: Arc<SourceStats>,
     stop: Arc<AtomicBool>,
+    /// Releases a paused producer ([`Source::start_paused`]).
+    go: Option<std::sync::mpsc::Sender<()>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -93,7 +95,8 @@ pub enum Feed {
 
 impl Feed {
     /// A receiver for one session, and the source it owns (per-session
-    /// feeds), which stops when dropped.
+    /// feeds: opened, paused until [`Source::resume`], so that its pacing
+    /// starts when the session does), which stops when dropped.
     pub fn subscribe(
         &self,
     ) -> anyhow::Result<(broadcast::Receiver<Arc<StreamFrame>>, Option<Source>)> {
@@ -102,7 +105,7 @@ impl Feed {
             Feed::PerSession { spec, buffers } => {
                 let tx = Source::channel();
                 let rx = tx.subscribe();
-                let source = Source::start(spec.clone(), buffers.clone(), tx)?;
+                let source = Source::start_paused(spec.clone(), buffers.clone(), tx)?;
                 Ok((rx, Some(source)))
             }
         }
@@ -126,9 +129,23 @@ impl Source {
         buffers: Vec<StreamBuffer>,
         frames: broadcast::Sender<Arc<StreamFrame>>,
     ) -> anyhow::Result<Self> {
+        let mut source = Self::start_paused(spec, buffers, frames)?;
+        source.resume();
+        Ok(source)
+    }
+
+    /// [`Source::start`], with the producer opened (the scene or dump, so
+    /// that errors come now) but waiting for [`Source::resume`] before its
+    /// first frame and the start of its pacing.
+    pub fn start_paused(
+        spec: SourceSpec,
+        buffers: Vec<StreamBuffer>,
+        frames: broadcast::Sender<Arc<StreamFrame>>,
+    ) -> anyhow::Result<Self> {
         let stats = Arc::new(SourceStats::default());
         let stop = Arc::new(AtomicBool::new(false));
         let mut producer = Producer::open(&spec)?;
+        let (go, released) = std::sync::mpsc::channel::<()>();
         let thread = {
             // The thread owns its sender: when a finite source ends and the
             // caller holds no other, subscribers see the channel close.
@@ -136,6 +153,11 @@ impl Source {
             std::thread::Builder::new()
                 .name("frame source".into())
                 .spawn(move || {
+                    // Released, or the source dropped (then `stop` is set).
+                    let _ = released.recv();
+                    if stop.load(Ordering::Relaxed) {
+                        return;
+                    }
                     if let Err(e) = producer.run(&frames, &buffers, &stats, &stop) {
                         tracing::error!("frame source stopped: {e:#}");
                     }
@@ -144,8 +166,16 @@ impl Source {
         Ok(Self {
             stats,
             stop,
+            go: Some(go),
             thread: Some(thread),
         })
+    }
+
+    /// Lets a paused producer start (nothing once it runs).
+    pub fn resume(&mut self) {
+        if let Some(go) = self.go.take() {
+            let _ = go.send(());
+        }
     }
 
     /// Stops the producer and waits for it (as dropping does).
@@ -160,6 +190,8 @@ impl Drop for Source {
     /// SIGSEGV after every test of a binary had passed).
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
+        // A paused producer wakes up to the closed channel and returns.
+        self.go = None;
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }

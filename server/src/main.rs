@@ -114,6 +114,9 @@ Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
         /// Color codec (depth and motion always use zstd).
         #[arg(long, default_value = "raw", value_parser = parse_codec)]
         color_codec: protocol::Codec,
+        /// Most sessions at once; one more is refused as "server full".
+        #[arg(long, default_value_t = host::session::DEFAULT_MAX_SESSIONS)]
+        max_sessions: usize,
     },
     /// Show what a scene declares and which passes it builds.
     #[command(after_help = "Examples:
@@ -216,6 +219,7 @@ fn command(cli: Cli) -> anyhow::Result<()> {
             size,
             window,
             color_codec,
+            max_sessions,
         } => {
             let (source, size, fps) = match dump {
                 Some(dir) => {
@@ -249,6 +253,7 @@ fn command(cli: Cli) -> anyhow::Result<()> {
                 token,
                 window,
                 color_codec,
+                max_sessions,
             }))
         }
         Command::Inspect { dir } => inspect(&dir),
@@ -370,6 +375,7 @@ struct ServeArgs {
     token: Option<String>,
     window: WindowMode,
     color_codec: protocol::Codec,
+    max_sessions: usize,
 }
 
 async fn serve(args: ServeArgs) -> anyhow::Result<()> {
@@ -392,6 +398,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         fps: args.fps,
         buffers: buffers.clone(),
         window_mode: args.window,
+        max_sessions: args.max_sessions,
     };
     // A dump replay without --loop starts afresh for every client; a scene
     // (or a looping dump) is one live stream that clients join.

@@ -62,6 +62,7 @@ async fn main() -> anyhow::Result<()> {
             fps: 30.0,
             buffers: buffers.clone(),
             window_mode: WindowMode::Off,
+            max_sessions: host::session::DEFAULT_MAX_SESSIONS,
         };
         let tx = Source::channel();
         let server = Server::start(

@@ -90,6 +90,7 @@ async fn a_blender_render_streams_without_import() {
         fps: dump.fps(),
         buffers: buffers.clone(),
         window_mode: WindowMode::Off,
+        max_sessions: host::session::DEFAULT_MAX_SESSIONS,
     };
     let feed = Feed::PerSession {
         spec: SourceSpec::Dump {

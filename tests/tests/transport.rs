@@ -45,6 +45,10 @@ fn write_dump(dir: &std::path::Path) {
 }
 
 async fn fixture(buffers: Vec<StreamBuffer>) -> Fixture {
+    fixture_with(buffers, host::session::DEFAULT_MAX_SESSIONS).await
+}
+
+async fn fixture_with(buffers: Vec<StreamBuffer>, max_sessions: usize) -> Fixture {
     let dir = tempfile::tempdir().unwrap();
     let dump = dir.path().join("dump");
     write_dump(&dump);
@@ -57,6 +61,7 @@ async fn fixture(buffers: Vec<StreamBuffer>) -> Fixture {
         fps: REPLAY_FPS,
         buffers: buffers.clone(),
         window_mode: WindowMode::Off,
+        max_sessions,
     };
     let frames = Source::channel();
     let server = Server::start(
@@ -182,6 +187,7 @@ async fn wrong_token_pin_and_version_are_refused_with_the_reason() {
         fps: REPLAY_FPS,
         buffers: fx.buffers.clone(),
         window_mode: WindowMode::Off,
+        max_sessions: host::session::DEFAULT_MAX_SESSIONS,
     };
     let started = Server::start(
         "127.0.0.1:0".parse().unwrap(),
@@ -439,6 +445,7 @@ async fn a_dump_replays_from_the_start_for_every_session() {
         fps: 60.0,
         buffers: fx.buffers.clone(),
         window_mode: WindowMode::Off,
+        max_sessions: host::session::DEFAULT_MAX_SESSIONS,
     };
     let feed = Feed::PerSession {
         spec: SourceSpec::Dump {
@@ -478,6 +485,17 @@ async fn a_dump_replays_from_the_start_for_every_session() {
     fx.server.shutdown().await;
 }
 
+/// Streams the fixture's dump to `session`, checks every frame arrives,
+/// then ends the session and the server.
+async fn every_frame_then_shut_down(fx: Fixture, mut session: client::Session) {
+    let source = fx.start_source();
+    let got = receive_all(&mut session).await;
+    assert_eq!(got.len(), FRAMES as usize);
+    source.stop();
+    session.close().await;
+    fx.server.shutdown().await;
+}
+
 /// The process's resident memory, bytes (Linux).
 fn resident_bytes() -> u64 {
     let statm = std::fs::read_to_string("/proc/self/statm").unwrap();
@@ -494,7 +512,7 @@ fn resident_bytes() -> u64 {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn only_a_hello_is_read_before_authentication() {
     let fx = fixture(StreamBuffer::default_set(Codec::Zstd).to_vec()).await;
-    let mut healthy = client::connect(fx.config()).await.unwrap();
+    let healthy = client::connect(fx.config()).await.unwrap();
     let header = [
         &(500u32 << 20).to_le_bytes()[..],
         &protocol::wire::WIRE_VERSION.to_le_bytes(),
@@ -545,10 +563,37 @@ async fn only_a_hello_is_read_before_authentication() {
     for (endpoint, _, _) in held {
         endpoint.close(0u32.into(), b"");
     }
-    let source = fx.start_source();
-    let got = receive_all(&mut healthy).await;
-    assert_eq!(got.len(), FRAMES as usize);
-    source.stop();
-    healthy.close().await;
-    fx.server.shutdown().await;
+    every_frame_then_shut_down(fx, healthy).await;
+}
+
+/// The session cap (issue 18 §3): with room for one session, a second
+/// authenticated client is refused with `ServerFull`; once the first has
+/// left, a new one is served. Every client goes through QUIC address
+/// validation (a retry) on the way, transparently.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_server_says_so() {
+    let fx = fixture_with(StreamBuffer::default_set(Codec::Zstd).to_vec(), 1).await;
+    let first = client::connect(fx.config()).await.unwrap();
+    match client::connect(fx.config()).await {
+        Err(ConnectError::Rejected(r)) => assert_eq!(r.reason, RejectReason::ServerFull),
+        Err(e) => panic!("expected ServerFull, got {e}"),
+        Ok(_) => panic!("expected ServerFull, got a session"),
+    }
+    first.close().await;
+    // The slot is free once the server has seen the first one go.
+    let mut third = None;
+    for _ in 0..50 {
+        match client::connect(fx.config()).await {
+            Ok(s) => {
+                third = Some(s);
+                break;
+            }
+            Err(ConnectError::Rejected(r)) if r.reason == RejectReason::ServerFull => {
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+    let third = third.expect("a session once the first left");
+    every_frame_then_shut_down(fx, third).await;
 }
