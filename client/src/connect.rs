@@ -287,6 +287,9 @@ async fn accept_streams(
         let (tx, cancelled) = (tx.clone(), cancelled.clone());
         tokio::spawn(async move {
             let id = recv.id().index();
+            // However the stream ends, its id leaves the cancelled set, so
+            // the set holds only streams still being read (issue 18 §10).
+            let _forget = Forget(&cancelled, id);
             loop {
                 if cancelled.lock().map(|c| c.contains(&id)).unwrap_or(false) {
                     let _ = recv.stop(0u32.into());
@@ -309,6 +312,31 @@ async fn accept_streams(
                 }
             }
         });
+    }
+}
+
+/// Removes a stream's id from the cancelled set when its reader ends.
+struct Forget<'a>(&'a Mutex<HashSet<StreamId>>, StreamId);
+
+impl Drop for Forget<'_> {
+    fn drop(&mut self) {
+        if let Ok(mut c) = self.0.lock() {
+            c.remove(&self.1);
+        }
+    }
+}
+
+/// Cancelled ids this far below the newest one are forgotten: their
+/// streams ended long ago (a cancellation that raced its stream's end would
+/// otherwise stay in the set for the whole session).
+const CANCELLED_SPAN: StreamId = 256;
+
+/// Adds `ids` to the cancelled set and forgets those [`CANCELLED_SPAN`] or
+/// more below the newest; the set stays bounded.
+fn cancel(set: &mut HashSet<StreamId>, ids: &[StreamId]) {
+    set.extend(ids.iter().copied());
+    if let Some(&newest) = set.iter().max() {
+        set.retain(|&id| id + CANCELLED_SPAN > newest);
     }
 }
 
@@ -365,12 +393,18 @@ async fn assemble(
         let Some(delivery) = delivery else { continue };
         if !delivery.cancel.is_empty() {
             if let Ok(mut c) = cancelled.lock() {
-                c.extend(delivery.cancel.iter().copied());
+                cancel(&mut c, &delivery.cancel);
             }
         }
         if let Some(encoded) = delivery.frame {
             let received = Instant::now();
-            match encoded.decode() {
+            // Decompression takes milliseconds per frame: off the runtime.
+            let decoded = tokio::task::spawn_blocking(move || encoded.decode()).await;
+            let Ok(decoded) = decoded else {
+                // The runtime is shutting down.
+                return;
+            };
+            match decoded {
                 Ok(frame) => {
                     let arrived = Arrived {
                         frame,
@@ -439,5 +473,30 @@ async fn control(
     tokio::select! {
         () = reader => {}
         () = writer => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cancelled set stays bounded over a long session, whatever the
+    /// order of cancellations and stream ends (issue 18 §10).
+    #[test]
+    fn the_cancelled_set_is_bounded() {
+        let mut set = HashSet::new();
+        for id in (0..100_000u64).step_by(4) {
+            cancel(&mut set, &[id, id + 1]);
+        }
+        assert!(
+            set.len() <= 2 * CANCELLED_SPAN as usize / 4 + 2,
+            "{}",
+            set.len()
+        );
+        assert!(set.contains(&99_997) && !set.contains(&1));
+        // A stream's reader forgets its own id when it ends.
+        let shared = Mutex::new(set);
+        drop(Forget(&shared, 99_997));
+        assert!(!shared.lock().unwrap().contains(&99_997));
     }
 }

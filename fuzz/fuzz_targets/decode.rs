@@ -21,15 +21,17 @@ fuzz_target!(|data: &[u8]| {
         assert!(msg.validate(&limits).is_ok());
     }
     // The first byte picks the chunk size for the streaming decoder.
+    // A decoder error ends only this part: the frame-stream decoder below
+    // must see every input too (it used to be skipped for most of them).
     if let Some((&chunk, rest)) = data.split_first() {
         let mut decoder = Decoder::new(limits);
-        for piece in rest.chunks(usize::from(chunk).max(1)) {
+        'stream: for piece in rest.chunks(usize::from(chunk).max(1)) {
             decoder.feed(piece);
             loop {
                 match decoder.next_message() {
                     Ok(Some(_)) => {}
                     Ok(None) => break,
-                    Err(_) => return,
+                    Err(_) => break 'stream,
                 }
             }
         }

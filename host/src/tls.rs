@@ -33,6 +33,29 @@ pub enum TlsError {
     /// quinn refused the TLS configuration.
     #[error("QUIC TLS configuration: {0}")]
     Quic(String),
+    /// The private key file can be read by others than its owner.
+    #[error(
+        "{path}: the private key has mode {mode:o}; it must be readable by its owner only (chmod 600)"
+    )]
+    KeyPermissions {
+        /// The key file.
+        path: PathBuf,
+        /// Its permission bits.
+        mode: u32,
+    },
+    /// Only one of the certificate and its key is there: a new pair would
+    /// change the fingerprint clients pin, so nothing is overwritten.
+    #[error(
+        "{dir} holds {present} without {missing}: restore the pair, or remove it for a new identity"
+    )]
+    HalfPair {
+        /// The identity directory.
+        dir: PathBuf,
+        /// The file present.
+        present: &'static str,
+        /// The file missing.
+        missing: &'static str,
+    },
 }
 
 /// A certificate and its private key.
@@ -52,20 +75,36 @@ impl Identity {
 
     /// Loads the identity from `dir` (`cert.der`, `key.der`), or creates and
     /// saves a new one for the names `localhost` and `127.0.0.1` if the
-    /// directory has none. The key file is written with mode 0600.
+    /// directory has neither. A key file readable by others, or one file of
+    /// the pair without the other, is an error (nothing is overwritten).
+    /// A new pair is written as a whole: into a temporary directory beside
+    /// `dir` that is then renamed to it (where `dir` is absent or empty),
+    /// the key with mode 0600.
     pub fn load_or_create(dir: &Path) -> Result<Self, TlsError> {
-        let (cert_path, key_path) = (dir.join("cert.der"), dir.join("key.der"));
-        let io = |path: &Path| {
-            let path = path.to_owned();
-            move |source| TlsError::Io { path, source }
-        };
-        if cert_path.exists() && key_path.exists() {
-            let cert = std::fs::read(&cert_path).map_err(io(&cert_path))?;
-            let key = std::fs::read(&key_path).map_err(io(&key_path))?;
-            return Ok(Self {
-                cert: CertificateDer::from(cert),
-                key: PrivatePkcs8KeyDer::from(key),
-            });
+        let (cert_path, key_path) = (dir.join(CERT_FILE), dir.join(KEY_FILE));
+        match (cert_path.exists(), key_path.exists()) {
+            (true, true) => {
+                check_private(&key_path)?;
+                let cert = std::fs::read(&cert_path).map_err(io(&cert_path))?;
+                let key = std::fs::read(&key_path).map_err(io(&key_path))?;
+                return Ok(Self {
+                    cert: CertificateDer::from(cert),
+                    key: PrivatePkcs8KeyDer::from(key),
+                });
+            }
+            (true, false) | (false, true) => {
+                let (present, missing) = if cert_path.exists() {
+                    (CERT_FILE, KEY_FILE)
+                } else {
+                    (KEY_FILE, CERT_FILE)
+                };
+                return Err(TlsError::HalfPair {
+                    dir: dir.to_owned(),
+                    present,
+                    missing,
+                });
+            }
+            (false, false) => {}
         }
         let generated =
             rcgen::generate_simple_self_signed(vec!["localhost".into(), "127.0.0.1".into()])?;
@@ -73,10 +112,37 @@ impl Identity {
             cert: generated.cert.der().clone(),
             key: PrivatePkcs8KeyDer::from(generated.signing_key.serialize_der()),
         };
-        std::fs::create_dir_all(dir).map_err(io(dir))?;
-        write_private(&key_path, identity.key.secret_pkcs8_der()).map_err(io(&key_path))?;
-        std::fs::write(&cert_path, identity.cert.as_ref()).map_err(io(&cert_path))?;
+        identity.save(dir)?;
         Ok(identity)
+    }
+
+    /// Writes the pair into `dir` as a whole (see [`Identity::load_or_create`]).
+    fn save(&self, dir: &Path) -> Result<(), TlsError> {
+        let name = dir
+            .file_name()
+            .map_or("identity".into(), |n| n.to_string_lossy());
+        let staging = dir.with_file_name(format!(".{name}.new-{}", std::process::id()));
+        let parent = staging.parent().unwrap_or(Path::new("."));
+        std::fs::create_dir_all(parent).map_err(io(parent))?;
+        let _ = std::fs::remove_dir_all(&staging);
+        std::fs::create_dir(&staging).map_err(io(&staging))?;
+        let write = |at: &Path| -> Result<(), TlsError> {
+            let key = at.join(KEY_FILE);
+            write_file(&key, self.key.secret_pkcs8_der(), true).map_err(io(&key))?;
+            let cert = at.join(CERT_FILE);
+            write_file(&cert, self.cert.as_ref(), false).map_err(io(&cert))
+        };
+        write(&staging)?;
+        // rename(2) replaces an absent or empty directory in one step.
+        if std::fs::rename(&staging, dir).is_ok() {
+            return Ok(());
+        }
+        // `dir` holds other files: each file of the pair is renamed in.
+        let moved = std::fs::create_dir_all(dir)
+            .and_then(|()| std::fs::rename(staging.join(KEY_FILE), dir.join(KEY_FILE)))
+            .and_then(|()| std::fs::rename(staging.join(CERT_FILE), dir.join(CERT_FILE)));
+        let _ = std::fs::remove_dir_all(&staging);
+        moved.map_err(io(dir))
     }
 
     /// The QUIC server configuration for this identity.
@@ -124,16 +190,55 @@ pub fn fingerprint(cert: &CertificateDer<'_>) -> String {
         .collect()
 }
 
-fn write_private(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+/// The certificate's file name in an identity directory.
+const CERT_FILE: &str = "cert.der";
+/// The private key's file name in an identity directory.
+const KEY_FILE: &str = "key.der";
+
+/// Maps an I/O error on `path` to a [`TlsError`].
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> TlsError + use<> {
+    let path = path.to_owned();
+    move |source| TlsError::Io { path, source }
+}
+
+/// Writes and syncs a new file; a private one with mode 0600 from the
+/// start (never readable by others, not even briefly).
+fn write_file(path: &Path, bytes: &[u8], private: bool) -> std::io::Result<()> {
     use std::io::Write;
     let mut options = std::fs::OpenOptions::new();
-    options.write(true).create(true).truncate(true);
+    options.write(true).create_new(true);
     #[cfg(unix)]
-    {
+    if private {
         use std::os::unix::fs::OpenOptionsExt;
         options.mode(0o600);
     }
-    options.open(path)?.write_all(bytes)
+    #[cfg(not(unix))]
+    let _ = private;
+    let mut file = options.open(path)?;
+    file.write_all(bytes)?;
+    file.sync_all()
+}
+
+/// A private key must be readable by its owner only.
+fn check_private(path: &Path) -> Result<(), TlsError> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(path)
+            .map_err(io(path))?
+            .permissions()
+            .mode()
+            & 0o777;
+        if mode & 0o077 != 0 {
+            return Err(TlsError::KeyPermissions {
+                path: path.to_owned(),
+                mode,
+            });
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = path;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -157,6 +262,45 @@ mod tests {
                 .mode();
             assert_eq!(mode & 0o777, 0o600);
         }
+        // A key others can read is refused, and so is half a pair; nothing
+        // is overwritten.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let key = dir.path().join("key.der");
+            std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o644)).unwrap();
+            assert!(matches!(
+                Identity::load_or_create(dir.path()),
+                Err(TlsError::KeyPermissions { mode: 0o644, .. })
+            ));
+            std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).unwrap();
+        }
+        std::fs::remove_file(dir.path().join("key.der")).unwrap();
+        assert!(matches!(
+            Identity::load_or_create(dir.path()),
+            Err(TlsError::HalfPair {
+                present: "cert.der",
+                ..
+            })
+        ));
+        assert!(dir.path().join("cert.der").exists());
+        // A new identity in a directory that does not exist yet, and in one
+        // that holds other files; no staging directory is left behind.
+        let parent = tempfile::tempdir().unwrap();
+        let fresh = parent.path().join("new").join("identity");
+        Identity::load_or_create(&fresh).unwrap();
+        std::fs::write(parent.path().join("new").join("notes"), b"x").unwrap();
+        let crowded = parent.path().join("new");
+        let c = Identity::load_or_create(&crowded).unwrap();
+        assert_eq!(
+            Identity::load_or_create(&crowded).unwrap().fingerprint(),
+            c.fingerprint()
+        );
+        let names: Vec<_> = std::fs::read_dir(parent.path().join("new"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        assert!(names.iter().all(|n| !n.starts_with('.')), "{names:?}");
         let other = tempfile::tempdir().unwrap();
         assert_ne!(
             Identity::load_or_create(other.path())
