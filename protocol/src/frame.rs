@@ -159,6 +159,16 @@ pub enum PixelFormat {
 }
 
 impl PixelFormat {
+    /// Every format.
+    pub const ALL: [PixelFormat; 6] = [
+        PixelFormat::Rgba16Float,
+        PixelFormat::Rgb16Float,
+        PixelFormat::Rg16Float,
+        PixelFormat::R32Float,
+        PixelFormat::Rg32Float,
+        PixelFormat::R8Unorm,
+    ];
+
     /// Channels per pixel.
     pub fn channels(self) -> u32 {
         match self {

@@ -1,0 +1,91 @@
+//! Writes the fuzz targets' seed corpus (`fuzz/seeds/<target>/`) from real
+//! data: frames of the analytic scene encoded as they travel (raw and zstd
+//! colour), the handshake messages, each encoded buffer for the codec
+//! target, and a one-frame native dump's files for the readers.
+//!
+//! `cargo run -p tests --example fuzz_corpus [-- DIR]` (default `fuzz/seeds`).
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use protocol::assemble::encode_frame;
+use protocol::codec::{Codec, DEFAULT_ZSTD_LEVEL};
+use protocol::dump::{DumpWriter, Manifest, frame_paths};
+use protocol::wire::{self, Hello, Message, StreamBuffer, WIRE_VERSION};
+use protocol::{FrameSize, PixelFormat};
+
+const SIZE: FrameSize = FrameSize::new(16, 9);
+
+/// The codec target's format byte for `format`: its index in
+/// `PixelFormat::ALL` (see `fuzz/fuzz_targets/codec.rs`).
+fn format_index(format: PixelFormat) -> u8 {
+    PixelFormat::ALL
+        .iter()
+        .position(|&f| f == format)
+        .expect("every format is in ALL") as u8
+}
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    std::fs::write(dir.join(name), bytes)?;
+    Ok(())
+}
+
+fn main() -> anyhow::Result<()> {
+    let out = std::env::args()
+        .nth(1)
+        .map_or_else(|| PathBuf::from("fuzz/seeds"), PathBuf::from);
+    let frames: Vec<_> = (0..2)
+        .map(|i| tests::render(i, 60.0, DVec3::ZERO, SIZE))
+        .collect();
+    for (c, color) in [Codec::Raw, Codec::Zstd].into_iter().enumerate() {
+        let buffers = StreamBuffer::default_set(color);
+        for (i, frame) in frames.iter().enumerate() {
+            let encoded = encode_frame(frame, &buffers, DEFAULT_ZSTD_LEVEL)?;
+            write(
+                &out.join("decode"),
+                &format!("frame-{c}-{i}"),
+                &encoded.to_stream_bytes()?,
+            )?;
+            for (b, (payload, desc)) in encoded
+                .payloads
+                .iter()
+                .zip(&encoded.header.buffers)
+                .enumerate()
+            {
+                let pick = u8::from(desc.codec == Codec::Zstd) | format_index(desc.format) << 1;
+                let seed = [
+                    &[pick][..],
+                    &(SIZE.pixels() as u16).to_le_bytes(),
+                    &payload.data,
+                ]
+                .concat();
+                write(&out.join("codec"), &format!("buffer-{c}-{i}-{b}"), &seed)?;
+            }
+        }
+    }
+    let hello = Message::Hello(Hello {
+        version: WIRE_VERSION,
+        client_name: "seed".into(),
+        token: "token".into(),
+        codecs: vec![Codec::Raw, Codec::Zstd],
+        max_size: FrameSize::new(8192, 8192),
+        window_modes: vec![],
+        extras: vec![],
+    });
+    write(&out.join("decode"), "hello", &wire::encode(&hello)?)?;
+    let dump = tempfile::tempdir()?;
+    let mut writer = DumpWriter::create(dump.path(), Manifest::new(60.0, SIZE, "fuzz seed"))?;
+    writer.write_frame(&frames[0])?;
+    writer.finish()?;
+    let (exr, meta) = frame_paths(dump.path(), 0);
+    let seed = [
+        std::fs::read(dump.path().join("manifest.json"))?,
+        std::fs::read(meta)?,
+        std::fs::read(exr)?,
+    ]
+    .join(&b"\n--\n"[..]);
+    write(&out.join("files"), "dump", &seed)?;
+    println!("seed corpus written to {}", out.display());
+    Ok(())
+}
