@@ -16,7 +16,7 @@ use protocol::wire::{
 use protocol::{Codec, Frame, FrameSize, Limits};
 use tokio::sync::mpsc;
 
-use crate::receiver::{FrameReceiver, ReceiveError, StreamId};
+use crate::receiver::{FrameReceiver, IN_FLIGHT_FRAMES, ReceiveError, StreamId, frame_bytes_bound};
 use crate::tls::{Pin, PinError};
 
 /// How to reach and authenticate to a server.
@@ -147,6 +147,9 @@ impl Session {
     }
 }
 
+/// Frame streams a session reads at once (more is a protocol error).
+const MAX_FRAME_STREAMS: usize = 64;
+
 fn protocol_err(e: impl std::fmt::Display) -> ConnectError {
     ConnectError::Protocol(e.to_string())
 }
@@ -192,7 +195,9 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
         bytes[4..6].copy_from_slice(&config.version.to_le_bytes());
     }
     send.write_all(&bytes).await.map_err(protocol_err)?;
-    let mut decoder = Decoder::new(config.limits);
+    // The control stream carries small messages only, and frames are
+    // bounded by what the welcome agreed (issue 18 §5).
+    let mut decoder = Decoder::new(config.limits.min(Limits::control()));
     let answer = tokio::time::timeout(
         Duration::from_secs(10),
         read_message(&mut recv, &mut decoder),
@@ -223,6 +228,9 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
         }
     };
 
+    let limits = config.limits.min(Limits::for_frames(welcome.max_frame));
+    let byte_budget = IN_FLIGHT_FRAMES * frame_bytes_bound(&limits, welcome.buffers.len());
+    let receiver = FrameReceiver::new(limits, MAX_FRAME_STREAMS).with_byte_budget(byte_budget);
     let stats = Arc::new(Mutex::new(SessionStats::default()));
     let (frames_tx, frames_rx) = mpsc::channel(config.queue.max(1));
     let (chunks_tx, chunks_rx) = mpsc::channel::<StreamEvent>(256);
@@ -232,7 +240,7 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
         tokio::spawn(accept_streams(conn.clone(), chunks_tx, cancelled.clone())),
         tokio::spawn(assemble(
             conn.clone(),
-            config.limits,
+            receiver,
             chunks_rx,
             frames_tx,
             cancelled,
@@ -343,14 +351,13 @@ fn cancel(set: &mut HashSet<StreamId>, ids: &[StreamId]) {
 /// Owns the [`FrameReceiver`]: reassembles, orders, decodes, delivers.
 async fn assemble(
     conn: quinn::Connection,
-    limits: Limits,
+    mut receiver: FrameReceiver,
     mut rx: mpsc::Receiver<StreamEvent>,
     frames: mpsc::Sender<Arrived>,
     cancelled: Arc<Mutex<HashSet<StreamId>>>,
     stats: Arc<Mutex<SessionStats>>,
     failure: Arc<Mutex<Option<String>>>,
 ) {
-    let mut receiver = FrameReceiver::new(limits, 64);
     let fail = |e: ReceiveError| {
         let reason = e.to_string();
         tracing::warn!("closing: {reason}");

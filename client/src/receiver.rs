@@ -42,6 +42,19 @@ pub enum ReceiveError {
     },
 }
 
+/// Frames' worth of bytes the receiver buffers across all in-flight
+/// streams ([`FrameReceiver::with_byte_budget`]): a real-time stream has a
+/// frame or two in flight; beyond this the oldest are dropped.
+pub const IN_FLIGHT_FRAMES: u64 = 4;
+
+/// The most bytes one frame stream of `buffers` buffers can carry within
+/// `limits`: its header message and one payload message per buffer.
+pub fn frame_bytes_bound(limits: &Limits, buffers: usize) -> u64 {
+    let message_head = protocol::wire::HEADER_LEN as u64 + 16;
+    let header = message_head + u64::from(limits.max_control);
+    header.saturating_add((buffers as u64).saturating_mul(message_head + limits.max_payload))
+}
+
 /// What one call produced.
 #[derive(Debug, Default)]
 pub struct Delivery {
@@ -55,6 +68,8 @@ pub struct Delivery {
 struct InFlight {
     decoder: Decoder,
     assembler: FrameAssembler,
+    /// Bytes taken from the stream so far.
+    bytes: u64,
 }
 
 /// Reassembles and orders frames from many concurrent streams.
@@ -68,6 +83,10 @@ pub struct FrameReceiver {
     cancelled: VecDeque<StreamId>,
     last_delivered: Option<u64>,
     stats: ClientStats,
+    /// Most bytes buffered across in-flight streams.
+    byte_budget: u64,
+    /// Bytes buffered across in-flight streams.
+    buffered: u64,
 }
 
 /// How many cancelled stream ids are remembered.
@@ -84,7 +103,53 @@ impl FrameReceiver {
             cancelled: VecDeque::new(),
             last_delivered: None,
             stats: ClientStats::default(),
+            byte_budget: u64::MAX,
+            buffered: 0,
         }
+    }
+
+    /// Buffers at most `bytes` across in-flight streams: when a chunk takes
+    /// the total past it, the streams of the oldest frames are dropped and
+    /// cancelled until it fits (issue 18 §5), which bounds the memory a
+    /// server can make the client hold, whatever it sends.
+    pub fn with_byte_budget(mut self, bytes: u64) -> Self {
+        self.byte_budget = bytes;
+        self
+    }
+
+    /// Bytes buffered across in-flight streams.
+    pub fn buffered(&self) -> u64 {
+        self.buffered
+    }
+
+    /// Removes an in-flight stream and its bytes from the total.
+    fn take(&mut self, stream: StreamId) -> Option<InFlight> {
+        let s = self.streams.remove(&stream)?;
+        self.buffered -= s.bytes;
+        Some(s)
+    }
+
+    /// Drops the oldest frames' streams until the buffered bytes fit the
+    /// budget; returns them, for cancellation.
+    fn fit_budget(&mut self) -> Vec<StreamId> {
+        let mut dropped = vec![];
+        while self.buffered > self.byte_budget {
+            // Oldest first: by frame index, a stream whose header has not
+            // arrived yet counting as newest; then by stream id.
+            let victim = self
+                .streams
+                .iter()
+                .min_by_key(|&(&id, s)| {
+                    (s.assembler.header().map_or(u64::MAX, |h| h.meta.index), id)
+                })
+                .map(|(&id, _)| id);
+            let Some(victim) = victim else { break };
+            self.take(victim);
+            self.stats.frames_dropped += 1;
+            self.remember_cancelled(victim);
+            dropped.push(victim);
+        }
+        dropped
     }
 
     /// Bytes read from `stream`.
@@ -102,7 +167,10 @@ impl FrameReceiver {
         let entry = self.streams.entry(stream).or_insert_with(|| InFlight {
             decoder: Decoder::new(limits),
             assembler: FrameAssembler::new(),
+            bytes: 0,
         });
+        entry.bytes += bytes.len() as u64;
+        self.buffered += bytes.len() as u64;
         entry.decoder.feed(bytes);
         let fail = |source: AssembleError| ReceiveError::Stream { stream, source };
         let mut complete = None;
@@ -111,15 +179,19 @@ impl FrameReceiver {
                 Ok(Some(m)) => m,
                 Ok(None) => break,
                 Err(e) => {
-                    self.streams.remove(&stream);
+                    self.take(stream);
                     return Err(fail(e.into()));
                 }
             };
             match entry.assembler.push(msg) {
-                Ok(Some(frame)) => complete = Some(frame),
+                Ok(Some(frame)) => {
+                    // The frame is handed on: the stream holds nothing now.
+                    self.buffered -= std::mem::take(&mut entry.bytes);
+                    complete = Some(frame);
+                }
                 Ok(None) => {}
                 Err(e) => {
-                    self.streams.remove(&stream);
+                    self.take(stream);
                     return Err(fail(e));
                 }
             }
@@ -128,7 +200,7 @@ impl FrameReceiver {
         // A header that is already superseded: stop the stream early.
         if let (Some(h), Some(last)) = (entry.assembler.header(), self.last_delivered) {
             if complete.is_none() && h.meta.index <= last {
-                self.streams.remove(&stream);
+                self.take(stream);
                 self.stats.frames_late += 1;
                 self.remember_cancelled(stream);
                 delivery.cancel.push(stream);
@@ -146,6 +218,7 @@ impl FrameReceiver {
                 delivery.frame = Some(frame);
             }
         }
+        delivery.cancel.extend(self.fit_budget());
         Ok(delivery)
     }
 
@@ -161,7 +234,7 @@ impl FrameReceiver {
             .map(|(&id, _)| id)
             .collect();
         for &id in &stale {
-            self.streams.remove(&id);
+            self.take(id);
             self.stats.frames_late += 1;
             self.remember_cancelled(id);
         }
@@ -189,7 +262,7 @@ impl FrameReceiver {
         if self.forget_cancelled(stream) {
             return Ok(());
         }
-        let Some(s) = self.streams.remove(&stream) else {
+        let Some(s) = self.take(stream) else {
             return Ok(());
         };
         let result = if s.decoder.is_at_boundary() {
@@ -209,7 +282,7 @@ impl FrameReceiver {
     /// dropped, which is not an error.
     pub fn on_stream_reset(&mut self, stream: StreamId) {
         self.forget_cancelled(stream);
-        if let Some(s) = self.streams.remove(&stream) {
+        if let Some(s) = self.take(stream) {
             if s.assembler.finish().is_err() {
                 self.stats.frames_dropped += 1;
             }
@@ -349,6 +422,46 @@ mod tests {
         // The first stream still completes.
         let d = r.on_data(1, &good[30..]).unwrap();
         assert_eq!(d.frame.unwrap().decode().unwrap().meta.index, 1);
+    }
+
+    /// The bytes buffered across streams stay within the budget: the
+    /// oldest frames' streams are dropped and cancelled to make room, and a
+    /// delivered frame's bytes leave the total (issue 18 §5).
+    #[test]
+    fn buffered_bytes_stay_within_the_budget() {
+        let (a, b, c) = (stream_bytes(1), stream_bytes(2), stream_bytes(3));
+        let frame = a.len() as u64;
+        let mut r = receiver().with_byte_budget(2 * frame);
+        // Frames 2 and 1, all but their last byte: two frames' worth.
+        r.on_data(20, &b[..b.len() - 1]).unwrap();
+        r.on_data(10, &a[..a.len() - 1]).unwrap();
+        assert_eq!(r.buffered(), 2 * frame - 2);
+        // Frame 3's first bytes take the total over: frame 1 (the oldest)
+        // is dropped and cancelled, frame 2 kept.
+        let d = r.on_data(30, &c[..10]).unwrap();
+        assert_eq!(d.cancel, vec![10]);
+        assert_eq!(r.buffered(), frame - 1 + 10);
+        assert!(r.buffered() <= 2 * frame);
+        assert_eq!(r.stats().frames_dropped, 1);
+        // Its remaining byte is ignored; frame 2 completes and its bytes
+        // leave the total before its FIN.
+        assert!(r.on_data(10, &a[a.len() - 1..]).unwrap().frame.is_none());
+        let d = r.on_data(20, &b[b.len() - 1..]).unwrap();
+        assert_eq!(d.frame.unwrap().header.meta.index, 2);
+        assert_eq!(r.buffered(), 10);
+        r.on_stream_end(20).unwrap();
+        r.on_stream_end(10).unwrap();
+        let d = r.on_data(30, &c[10..]).unwrap();
+        assert_eq!(d.frame.unwrap().header.meta.index, 3);
+        assert_eq!(r.buffered(), 0);
+        // Whatever a sender does, the total never passes the budget.
+        let mut r = receiver().with_byte_budget(frame + frame / 2);
+        for id in 0..8u64 {
+            let bytes = stream_bytes(10 + id);
+            r.on_data(id, &bytes[..bytes.len() - 1]).unwrap();
+            assert!(r.buffered() <= frame + frame / 2, "stream {id}");
+        }
+        assert_eq!(r.stats().frames_dropped, 7);
     }
 
     #[test]

@@ -13,6 +13,7 @@ fuzz_target!(|data: &[u8]| {
     // Tight limits keep each run's memory small without changing the code paths.
     let limits = Limits {
         max_dimension: 512,
+        max_pixels: 512 * 512,
         max_payload: 1 << 20,
         max_control: 64 << 10,
     };

@@ -131,6 +131,7 @@ pub fn answer(policy: &Policy, hello: &Hello, session_id: u64) -> Result<Welcome
         fps: policy.fps,
         buffers: policy.buffers.clone(),
         window_mode: policy.window_mode,
+        max_frame: policy.max_frame,
     })
 }
 

@@ -66,6 +66,9 @@ pub struct SourceStats {
     pub produced: AtomicU64,
     /// Frames skipped by the pacer because production fell behind.
     pub skipped: AtomicU64,
+    /// Dump frames that could not be read and were left out (the next
+    /// frame sent is flagged as a cut).
+    pub unreadable: AtomicU64,
 }
 
 /// A running producer thread.
@@ -198,6 +201,14 @@ impl Drop for Source {
     }
 }
 
+/// Unreadable dump frames in a row, and whether the next frame sent must
+/// be flagged as a cut.
+#[derive(Default)]
+struct Gap {
+    run: u64,
+    cut_next: bool,
+}
+
 enum Producer {
     Scene { renderer: Box<Renderer>, fps: f64 },
     Dump { reader: Box<AnyDump>, looped: bool },
@@ -241,10 +252,14 @@ impl Producer {
                 let n = reader.len();
                 let offset = Self::loop_offset(reader, *looped, k)?;
                 let t = reader.read_meta(k % n)?.time + offset;
+                // An unreadable next frame costs only the pacer's look-ahead;
+                // it is left out when its own turn comes.
                 let next = if k % n + 1 < n {
-                    Some(reader.read_meta(k % n + 1)?.time + offset)
+                    reader.read_meta(k % n + 1).ok().map(|m| m.time + offset)
                 } else if *looped {
-                    Some(reader.read_meta(0)?.time + Self::loop_offset(reader, true, k + 1)?)
+                    let first = reader.read_meta(0).ok();
+                    let offset = Self::loop_offset(reader, true, k + 1).ok();
+                    first.zip(offset).map(|(m, offset)| m.time + offset)
                 } else {
                     None
                 };
@@ -284,11 +299,44 @@ impl Producer {
         Ok((k / n) as f64 * (span + 1.0 / reader.fps()))
     }
 
+    /// Frames in one pass of the source (a scene never ends).
+    fn len(&self) -> u64 {
+        match self {
+            Producer::Scene { .. } => u64::MAX,
+            Producer::Dump { reader, .. } => reader.len(),
+        }
+    }
+
     fn finished(&self, k: u64) -> bool {
         match self {
             Producer::Scene { .. } => false,
             Producer::Dump { reader, looped } => !looped && k >= reader.len(),
         }
+    }
+
+    /// What producing frame `k` gave: `Some` value, or `None` for a dump
+    /// frame that could not be read (counted and logged; the next frame sent
+    /// becomes a cut). A scene's render failing is fatal (the device is
+    /// gone), and so is a dump none of whose frames could be read in a row.
+    fn readable<T>(
+        &self,
+        result: anyhow::Result<T>,
+        k: u64,
+        stats: &SourceStats,
+        gap: &mut Gap,
+    ) -> anyhow::Result<Option<T>> {
+        let error = match (result, self) {
+            (Ok(value), _) => return Ok(Some(value)),
+            (Err(e), Producer::Scene { .. }) => return Err(e.context(format!("frame {k}"))),
+            (Err(e), Producer::Dump { .. }) => e,
+        };
+        let n = self.len();
+        stats.unreadable.fetch_add(1, Ordering::Relaxed);
+        gap.run += 1;
+        gap.cut_next = true;
+        tracing::warn!("dump frame {} left out: {error:#}", k % n);
+        anyhow::ensure!(gap.run < n, "no frame of the dump could be read: {error:#}");
+        Ok(None)
     }
 
     fn run(
@@ -301,8 +349,16 @@ impl Producer {
         let epoch = Instant::now();
         let mut pacer = Pacer::new(1.0);
         let mut k = 0u64;
+        // A dump frame that cannot be read is left out, and the frame sent
+        // after it is a cut (as `import` does): the client must not blend
+        // across the gap. A dump whose every frame fails in a row stops.
+        let mut gap = Gap::default();
         while !stop.load(Ordering::Relaxed) && !self.finished(k) {
-            let (t, next) = self.times(k)?;
+            let times = self.times(k);
+            let Some((t, next)) = self.readable(times, k, stats, &mut gap)? else {
+                k += 1;
+                continue;
+            };
             match pacer.decide(epoch.elapsed(), t, next) {
                 Pace::WaitUntil(at) => {
                     let wait = at
@@ -319,7 +375,13 @@ impl Producer {
                 Pace::Send => {}
             }
             let started = Instant::now();
-            let mut frame = self.frame(k)?;
+            let frame = self.frame(k);
+            let Some(mut frame) = self.readable(frame, k, stats, &mut gap)? else {
+                k += 1;
+                continue;
+            };
+            gap.run = 0;
+            frame.meta.cut |= std::mem::take(&mut gap.cut_next);
             let encoded = encode_frame(&frame, buffers, protocol::codec::DEFAULT_ZSTD_LEVEL)?;
             // Host processing = render (or read) + encode, as a duration.
             frame.meta.host_processing =
@@ -378,5 +440,69 @@ mod tests {
             assert_eq!(f.meta.cut, k == 10 || k == 20, "frame {k}");
         }
         assert!(!producer.finished(1000));
+    }
+
+    /// Runs `spec` to its end and returns the frames' indices and cuts.
+    fn replay(spec: &SourceSpec) -> (Vec<(u64, bool)>, SourceStats, anyhow::Result<()>) {
+        let mut producer = Producer::open(spec).unwrap();
+        let tx = broadcast::channel(64).0;
+        let mut rx = tx.subscribe();
+        let stats = SourceStats::default();
+        let buffers = StreamBuffer::default_set(protocol::Codec::Raw);
+        let result = producer.run(&tx, &buffers, &stats, &AtomicBool::new(false));
+        let mut sent = vec![];
+        while let Ok(f) = rx.try_recv() {
+            let mut decoder = protocol::wire::Decoder::new(protocol::Limits::default());
+            decoder.feed(&f.bytes);
+            let Ok(Some(protocol::wire::Message::FrameHeader(h))) = decoder.next_message() else {
+                panic!("frame {} does not start with its header", f.index);
+            };
+            sent.push((h.meta.index, h.meta.cut));
+        }
+        (sent, stats, result)
+    }
+
+    /// A frame of a replayed dump that cannot be read is left out and
+    /// counted, the stream goes on, and the next frame is a cut (issue 18
+    /// §4); a dump none of whose frames can be read stops with an error.
+    #[test]
+    fn an_unreadable_dump_frame_is_left_out_and_the_next_is_a_cut() {
+        let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/blender");
+        let dir = tempfile::tempdir().unwrap();
+        for entry in std::fs::read_dir(&fixture).unwrap() {
+            let path = entry.unwrap().path();
+            std::fs::copy(&path, dir.path().join(path.file_name().unwrap())).unwrap();
+        }
+        // Frame 3 (0004.exr) truncated to half, frame 6 replaced by text.
+        let bytes = std::fs::read(dir.path().join("0004.exr")).unwrap();
+        std::fs::write(dir.path().join("0004.exr"), &bytes[..bytes.len() / 2]).unwrap();
+        std::fs::write(dir.path().join("0007.exr"), b"not an EXR").unwrap();
+        let spec = SourceSpec::Dump {
+            dir: dir.path().into(),
+            looped: false,
+        };
+        let (sent, stats, result) = replay(&spec);
+        result.unwrap();
+        let expect: Vec<(u64, bool)> = [0, 1, 2, 4, 5, 7, 8, 9]
+            .into_iter()
+            .map(|i| (i, i == 4 || i == 7))
+            .collect();
+        assert_eq!(sent, expect);
+        assert_eq!(stats.unreadable.load(Ordering::Relaxed), 2);
+        assert_eq!(stats.produced.load(Ordering::Relaxed), 8);
+
+        // Every frame unreadable: an error, not an endless loop.
+        for i in 1..=10 {
+            std::fs::write(dir.path().join(format!("{i:04}.exr")), b"").unwrap();
+        }
+        let looped = SourceSpec::Dump {
+            dir: dir.path().into(),
+            looped: true,
+        };
+        let (sent, stats, result) = replay(&looped);
+        assert!(sent.is_empty());
+        let error = format!("{:#}", result.unwrap_err());
+        assert!(error.contains("no frame of the dump"), "{error}");
+        assert_eq!(stats.unreadable.load(Ordering::Relaxed), 10);
     }
 }

@@ -66,6 +66,16 @@ pub enum ValidationError {
         /// The largest allowed side.
         max: u32,
     },
+    /// A frame larger in area than the limits allow.
+    #[error("frame size {width}x{height} has more than {max} pixels")]
+    TooManyPixels {
+        /// Width in pixels.
+        width: u32,
+        /// Height in pixels.
+        height: u32,
+        /// The largest allowed area.
+        max: u64,
+    },
     /// A pixel format that a buffer kind cannot use.
     #[error("pixel format {format:?} is not allowed for {kind:?} buffers")]
     FormatNotAllowed {
@@ -114,6 +124,8 @@ pub enum ValidationError {
 pub struct Limits {
     /// Largest width or height, in pixels.
     pub max_dimension: u32,
+    /// Largest width × height, in pixels.
+    pub max_pixels: u64,
     /// Largest body of a single buffer payload message, in bytes.
     pub max_payload: u64,
     /// Largest body of any other message (handshake, header, stats), in bytes.
@@ -138,13 +150,45 @@ impl Limits {
     /// token and every option is a few hundred bytes.
     pub const MAX_CONTROL_STREAM: u32 = 4 * 1024;
 
-    /// Checks that a frame size is within `1..=max_dimension` on both sides.
+    /// The limits of a stream whose frames are at most `max` (the client's,
+    /// once the server's welcome has said so; issue 18 §5): sides and area
+    /// up to `max`'s, a payload up to the largest buffer of that area
+    /// (8 bytes a pixel) grown by the codec that can grow it most.
+    pub fn for_frames(max: FrameSize) -> Self {
+        let pixels = u64::from(max.width) * u64::from(max.height);
+        Self {
+            max_dimension: max.width.max(max.height),
+            max_pixels: pixels,
+            max_payload: codec::zstd_compress_bound(pixels.saturating_mul(8)),
+            ..Self::default()
+        }
+    }
+
+    /// The tighter of two limits, field by field.
+    pub fn min(self, other: Self) -> Self {
+        Self {
+            max_dimension: self.max_dimension.min(other.max_dimension),
+            max_pixels: self.max_pixels.min(other.max_pixels),
+            max_payload: self.max_payload.min(other.max_payload),
+            max_control: self.max_control.min(other.max_control),
+        }
+    }
+
+    /// Checks that a frame size is within `1..=max_dimension` on both sides
+    /// and at most `max_pixels` in area.
     pub fn check_size(&self, width: u32, height: u32) -> Result<(), ValidationError> {
         if width == 0 || height == 0 || width > self.max_dimension || height > self.max_dimension {
             return Err(ValidationError::BadSize {
                 width,
                 height,
                 max: self.max_dimension,
+            });
+        }
+        if u64::from(width) * u64::from(height) > self.max_pixels {
+            return Err(ValidationError::TooManyPixels {
+                width,
+                height,
+                max: self.max_pixels,
             });
         }
         Ok(())
@@ -155,6 +199,7 @@ impl Default for Limits {
     fn default() -> Self {
         Self {
             max_dimension: Self::MAX_DIMENSION,
+            max_pixels: u64::from(Self::MAX_DIMENSION) * u64::from(Self::MAX_DIMENSION),
             // The largest raw buffer (8192² pixels at 8 bytes: RGBA f16, RG
             // f32), encoded by the codec that can grow it most (zstd on
             // incompressible data).

@@ -147,15 +147,13 @@ fn header_fields_are_checked_before_the_body_is_buffered() {
     let limits = Limits::default();
     let mut bytes = encode(&Message::Ping(Ping { seq: 1, sent_us: 2 })).unwrap();
     // Version.
-    bytes[4] = 2;
+    let other = WIRE_VERSION + 1;
+    bytes[4..6].copy_from_slice(&other.to_le_bytes());
     assert!(matches!(
         decode_message(&bytes[..HEADER_LEN], &limits),
-        Err(WireError::UnsupportedVersion {
-            got: 2,
-            supported: 1
-        })
+        Err(WireError::UnsupportedVersion { got, supported: WIRE_VERSION }) if got == other
     ));
-    bytes[4] = 1;
+    bytes[4..6].copy_from_slice(&WIRE_VERSION.to_le_bytes());
     // Kind.
     bytes[6] = 200;
     assert!(matches!(
@@ -259,4 +257,65 @@ fn unexpected_kinds_are_refused_from_the_header() -> Result<(), WireError> {
     d.feed(&long[..HEADER_LEN]);
     assert!(matches!(d.next_message(), Err(WireError::TooLong { .. })));
     Ok(())
+}
+
+/// The limits of a negotiated stream (issue 18 §5): a header for a frame
+/// larger in either side or in area than the welcome's largest frame, or a
+/// payload larger than such a frame's largest buffer, is refused from the
+/// bytes that announce it.
+#[test]
+fn limits_for_the_agreed_frames_are_tight() {
+    let max = protocol::FrameSize::new(160, 90);
+    let limits = Limits::for_frames(max);
+    assert_eq!(limits.max_dimension, 160);
+    assert!(limits.check_size(160, 90).is_ok());
+    assert!(matches!(
+        limits.check_size(161, 1),
+        Err(ValidationError::BadSize { .. })
+    ));
+    assert!(matches!(
+        limits.check_size(150, 100),
+        Err(ValidationError::TooManyPixels { max: 14_400, .. })
+    ));
+    // One raw buffer of the largest frame at 8 bytes a pixel fits a payload.
+    assert!(limits.max_payload >= 160 * 90 * 8 && limits.max_payload < 160 * 90 * 9);
+    assert_eq!(Limits::default().min(limits), limits);
+
+    let header = header_with(|h| h.meta.size = protocol::FrameSize::new(100, 200));
+    assert!(matches!(
+        decode_message(&header, &limits),
+        Err(WireError::Invalid { .. })
+    ));
+    // A payload message announcing more than that is refused from its header.
+    let payload = encode(&Message::Payload(BufferPayload {
+        frame_index: 0,
+        kind: protocol::BufferKind::Color,
+        data: vec![0; limits.max_payload as usize + 64],
+    }))
+    .unwrap();
+    assert!(matches!(
+        decode_message(&payload[..HEADER_LEN], &limits),
+        Err(WireError::TooLong { .. })
+    ));
+}
+
+/// A welcome whose largest frame is smaller than its size is refused.
+#[test]
+fn a_welcome_largest_frame_covers_its_size() {
+    let welcome = |max_frame| {
+        encode(&Message::Welcome(Welcome {
+            session_id: 1,
+            server_name: "s".into(),
+            size: protocol::FrameSize::new(64, 32),
+            fps: 30.0,
+            buffers: StreamBuffer::default_set(protocol::Codec::Raw).to_vec(),
+            window_mode: WindowMode::KeepDensity,
+            max_frame,
+        }))
+        .unwrap()
+    };
+    let ok = welcome(protocol::FrameSize::new(80, 40));
+    assert!(decode_message(&ok, &Limits::default()).is_ok());
+    let e = invalid_reason(&welcome(protocol::FrameSize::new(80, 31)));
+    assert!(matches!(e, ValidationError::OutOfRange(_)), "{e}");
 }

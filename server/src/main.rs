@@ -434,9 +434,10 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         })
     };
     let (produced, skipped) = (load(|s| &s.produced), load(|s| &s.skipped));
+    let unreadable = load(|s| &s.unreadable);
     let c = &server.counters;
     println!(
-        "frames produced {produced}, skipped by the pacer {skipped}; sessions {}, refused {}, frames sent {}, dropped for slow clients {}",
+        "frames produced {produced}, skipped by the pacer {skipped}, unreadable {unreadable}; sessions {}, refused {}, frames sent {}, dropped for slow clients {}",
         c.sessions.load(std::sync::atomic::Ordering::Relaxed),
         c.refused.load(std::sync::atomic::Ordering::Relaxed),
         c.frames_sent.load(std::sync::atomic::Ordering::Relaxed),

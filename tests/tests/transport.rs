@@ -214,7 +214,9 @@ async fn wrong_token_pin_and_version_are_refused_with_the_reason() {
         Err(ConnectError::Rejected(r)) => {
             assert_eq!(
                 r.reason,
-                RejectReason::UnsupportedVersion { server: 1 },
+                RejectReason::UnsupportedVersion {
+                    server: protocol::wire::WIRE_VERSION
+                },
                 "{}",
                 r.message
             )
@@ -377,6 +379,7 @@ async fn fake_server(
             fps: 60.0,
             buffers: StreamBuffer::default_set(Codec::Raw).to_vec(),
             window_mode: WindowMode::Off,
+            max_frame: SIZE,
         });
         send.write_all(&protocol::wire::encode(&welcome).unwrap())
             .await
@@ -399,9 +402,15 @@ async fn a_bad_server_is_reported_and_a_reconnect_gets_the_stream_again() {
     let mut nan = good.clone();
     nan.header.meta.camera.pose.position.x = f64::NAN;
     let whole = good.to_stream_bytes().unwrap();
+    // A frame one row taller than the welcome's largest frame (issue 18 §5:
+    // the client's limits tighten to what the welcome agreed).
+    let taller = FrameSize::new(SIZE.width, SIZE.height + 1);
+    let too_large = tests::render(3, 60.0, DVec3::ZERO, taller);
+    let too_large = protocol::assemble::encode_frame(&too_large, &buffers, 1).unwrap();
     let cases = [
         (nan.to_stream_bytes().unwrap(), "not finite"),
         (whole[..whole.len() / 2].to_vec(), "incomplete"),
+        (too_large.to_stream_bytes().unwrap(), "more than"),
     ];
     let dir = tempfile::tempdir().unwrap();
     let identity = Identity::load_or_create(dir.path()).unwrap();

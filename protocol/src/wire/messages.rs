@@ -76,6 +76,9 @@ pub struct Welcome {
     pub buffers: Vec<StreamBuffer>,
     /// How the rendering window is widened.
     pub window_mode: WindowMode,
+    /// The largest frame the stream sends (the widened window makes frames
+    /// larger than `size`): the client tightens its limits to it.
+    pub max_frame: FrameSize,
 }
 
 /// Why a server refused a client.
@@ -314,6 +317,10 @@ impl Message {
             Message::Welcome(w) => {
                 check_text("server name", &w.server_name)?;
                 limits.check_size(w.size.width, w.size.height)?;
+                limits.check_size(w.max_frame.width, w.max_frame.height)?;
+                if w.max_frame.width < w.size.width || w.max_frame.height < w.size.height {
+                    return Err(ValidationError::OutOfRange("largest frame below the size"));
+                }
                 if !w.fps.is_finite() {
                     return Err(ValidationError::NonFinite("fps"));
                 }

@@ -178,10 +178,16 @@ pub fn message() -> impl Strategy<Value = Message> {
             size(),
             1.0f64..240.0,
             stream_buffers(),
-            window_mode()
+            window_mode(),
+            (0u32..=64, 0u32..=64)
         )
             .prop_map(
-                |(session_id, server_name, size, fps, buffers, window_mode)| {
+                |(session_id, server_name, size, fps, buffers, window_mode, grow)| {
+                    // The largest frame: the size, widened within the limits.
+                    let max_frame = FrameSize::new(
+                        (size.width + grow.0).min(8192),
+                        (size.height + grow.1).min(8192),
+                    );
                     Message::Welcome(Welcome {
                         session_id,
                         server_name,
@@ -189,6 +195,7 @@ pub fn message() -> impl Strategy<Value = Message> {
                         fps,
                         buffers,
                         window_mode,
+                        max_frame,
                     })
                 }
             ),
