@@ -115,14 +115,18 @@ fn start_local_from(
 }
 
 impl LocalServer {
-    /// Connects a client session to it.
-    pub async fn connect(&self) -> anyhow::Result<Session> {
-        Ok(crate::connect(ConnectConfig::new(
+    /// How a client reaches and authenticates to it.
+    pub fn config(&self) -> ConnectConfig {
+        ConnectConfig::new(
             self.addr,
             Pin::Sha256(self.fingerprint.clone()),
             self.token.clone(),
-        ))
-        .await?)
+        )
+    }
+
+    /// Connects a client session to it.
+    pub async fn connect(&self) -> anyhow::Result<Session> {
+        Ok(crate::connect(self.config()).await?)
     }
 }
 

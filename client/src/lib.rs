@@ -12,6 +12,7 @@
 pub mod connect;
 pub mod demo;
 pub mod eval;
+pub mod impair;
 pub mod present;
 pub mod receiver;
 pub mod tls;

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::{Args, Parser, Subcommand};
+use client::impair::{Impairment, Relay};
 use client::present::{PresentConfig, run_headless};
 use client::{ConnectConfig, Pin};
 use framegen::Method;
@@ -99,6 +100,11 @@ struct RunArgs {
     /// Write every presented frame into a dump here.
     #[arg(long)]
     dump_to: Option<PathBuf>,
+    /// Impair the network between client and server through a relay on
+    /// 127.0.0.1, e.g. `loss=10%,delay=30ms,jitter=20ms,rate=50mbit`
+    /// (also reorder=P%, limit=DATAGRAMS, seed=N; netem's meanings).
+    #[arg(long, value_name = "SPEC")]
+    impair: Option<Impairment>,
 }
 
 impl Default for RunArgs {
@@ -236,6 +242,9 @@ struct ConnectArgs {
     /// Write the received frames as a dump.
     #[arg(long)]
     dump_to: Option<PathBuf>,
+    /// Impair the network through a relay on 127.0.0.1 (as `run --impair`).
+    #[arg(long, value_name = "SPEC")]
+    impair: Option<Impairment>,
 }
 
 /// An error ends the process with one line on stderr (the whole chain, no
@@ -329,6 +338,7 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
         frames,
         seconds,
         dump_to,
+        impair,
     } = args;
     let pin = match (pin, pin_file, dangerous_accept_any_certificate) {
         (Some(hex), _, _) => Pin::Sha256(hex),
@@ -345,7 +355,7 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
     };
     let runtime = tokio::runtime::Runtime::new()?;
     runtime.block_on(async move {
-        let mut session = client::connect(ConnectConfig::new(addr, pin, token)).await?;
+        let (mut session, relay) = connect_impaired(ConnectConfig::new(addr, pin, token), impair).await?;
         let w = &session.welcome;
         println!(
             "session {} with {}: {}x{} at {} fps, buffers {:?}, window {:?}",
@@ -404,8 +414,41 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
             println!("wrote {} frames to {}", m.frame_count, dump_to.unwrap_or_default().display());
         }
         session.close().await;
+        report_relay(relay.as_ref());
         anyhow::Ok(())
     })
+}
+
+/// Connects as `config` says, through an impairment relay when `impair`
+/// is given (the relay must outlive the session).
+async fn connect_impaired(
+    mut config: ConnectConfig,
+    impair: Option<Impairment>,
+) -> anyhow::Result<(client::Session, Option<Relay>)> {
+    let relay = match impair {
+        Some(imp) => {
+            let relay = Relay::start(config.addr, imp).await?;
+            println!("impaired network: {imp:?}, through {}", relay.local_addr());
+            config.addr = relay.local_addr();
+            Some(relay)
+        }
+        None => None,
+    };
+    Ok((client::connect(config).await?, relay))
+}
+
+/// What the impairment relay did, both ways.
+fn report_relay(relay: Option<&Relay>) {
+    if let Some(r) = relay {
+        let line = |(delivered, lost, overflowed): (u64, u64, u64)| {
+            format!("{delivered} delivered, {lost} lost, {overflowed} dropped by the queue limit")
+        };
+        println!(
+            "relay datagrams: to the server {}; to the client {}",
+            line(r.upstream.snapshot()),
+            line(r.downstream.snapshot())
+        );
+    }
 }
 
 /// `client run`: the demo, in a window when there is a display.
@@ -469,16 +512,17 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
                 }
             },
         };
-        let mut session = match (&local, args.server) {
-            (Some(l), _) => l.connect().await?,
+        let config = match (&local, args.server) {
+            (Some(l), _) => l.config(),
             (None, Some(addr)) => {
                 let (Some(pin), Some(token)) = (args.pin.clone(), args.token.clone()) else {
                     anyhow::bail!("--server needs --pin FINGERPRINT and --token TOKEN");
                 };
-                client::connect(ConnectConfig::new(addr, Pin::Sha256(pin), token)).await?
+                ConnectConfig::new(addr, Pin::Sha256(pin), token)
             }
             (None, None) => unreachable!("a local server exists without --server"),
         };
+        let (mut session, relay) = connect_impaired(config, args.impair).await?;
         let gpu = match args.backend.as_str() {
             "cpu" => None,
             wanted => match client::demo::gpu() {
@@ -537,6 +581,7 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             report.restarts,
         );
         print!("{}", report.summary.to_text());
+        report_relay(relay.as_ref());
         if let Some(path) = &args.json {
             std::fs::write(path, serde_json::to_vec_pretty(&report)?)?;
             println!("wrote {}", path.display());
