@@ -147,6 +147,14 @@ impl Session {
     }
 }
 
+/// How often the client makes sure the connection carries a packet.
+const KEEP_ALIVE: Duration = Duration::from_secs(1);
+
+/// A server silent this long is gone: the session ends (and a
+/// [`crate::Stream`] reconnects). A server that restarted says so at once
+/// with a stateless reset (`host::tls::Identity::quic_endpoint_config`).
+pub const IDLE_TIMEOUT: Duration = Duration::from_secs(5);
+
 /// Frame streams a session reads at once (more is a protocol error).
 const MAX_FRAME_STREAMS: usize = 64;
 
@@ -167,7 +175,8 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
         .max_concurrent_uni_streams(64u32.into())
         .stream_receive_window((64u32 << 20).into())
         .receive_window((256u32 << 20).into())
-        .keep_alive_interval(Some(Duration::from_secs(2)));
+        .keep_alive_interval(Some(KEEP_ALIVE))
+        .max_idle_timeout(Some(IDLE_TIMEOUT.try_into().map_err(protocol_err)?));
     client_config.transport_config(Arc::new(transport));
     let bind: SocketAddr = if config.addr.is_ipv6() {
         "[::]:0".parse().map_err(protocol_err)?

@@ -15,7 +15,7 @@ use protocol::FrameSize;
 use protocol::wire::{StreamBuffer, WindowMode};
 use scene::render::WindowSettings;
 
-use crate::{ConnectConfig, Pin, Session};
+use crate::{ConnectConfig, Pin, Stream};
 
 /// A running in-process server and its source.
 pub struct LocalServer {
@@ -99,7 +99,7 @@ fn start_local_from(
     let source = Source::start(spec, buffers, frames.clone())?;
     let server = Server::start(
         "127.0.0.1:0".parse()?,
-        identity.quic_server_config()?,
+        &identity,
         policy,
         Feed::Live(frames),
     )?;
@@ -124,9 +124,9 @@ impl LocalServer {
         )
     }
 
-    /// Connects a client session to it.
-    pub async fn connect(&self) -> anyhow::Result<Session> {
-        Ok(crate::connect(self.config()).await?)
+    /// Connects a client stream to it.
+    pub async fn connect(&self) -> anyhow::Result<Stream> {
+        Ok(Stream::connect(self.config(), crate::ReconnectPolicy::default()).await?)
     }
 }
 

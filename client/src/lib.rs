@@ -1,8 +1,9 @@
-//! The streaming client. Transport (quinn), presentation and `eval` arrive
-//! with their issues; the sans-IO core that turns per-frame streams into an
-//! ordered sequence of frames is here already.
+//! The streaming client: transport, presentation and `eval`.
 //!
 //! * [`connect`] and [`tls`]: the QUIC session with a pinned certificate;
+//! * [`reconnect`]: a stream that reconnects when its server goes away;
+//! * [`impair`]: a lossy, jittery relay for tests and demos;
+//! * [`present`]: the presentation loop, headless or into [`window`];
 //! * [`eval`]: `client eval`, quality against milliseconds for every
 //!   method and setting;
 //! * [`receiver`]: reassembles frames from per-frame streams, delivers them
@@ -15,9 +16,11 @@ pub mod eval;
 pub mod impair;
 pub mod present;
 pub mod receiver;
+pub mod reconnect;
 pub mod tls;
 pub mod window;
 
 pub use connect::{Arrived, ConnectConfig, ConnectError, Session, SessionStats, connect};
 pub use receiver::{Delivery, FrameReceiver, ReceiveError, StreamId};
+pub use reconnect::{ReconnectPolicy, Stream, StreamStats};
 pub use tls::Pin;

@@ -105,6 +105,10 @@ struct RunArgs {
     /// (also reorder=P%, limit=DATAGRAMS, seed=N; netem's meanings).
     #[arg(long, value_name = "SPEC")]
     impair: Option<Impairment>,
+    /// Reconnect to a server that went away for up to this many seconds
+    /// (0: end with the session), presenting what is there meanwhile.
+    #[arg(long, default_value_t = 30.0, value_name = "SECONDS")]
+    reconnect_for: f64,
 }
 
 impl Default for RunArgs {
@@ -245,6 +249,10 @@ struct ConnectArgs {
     /// Impair the network through a relay on 127.0.0.1 (as `run --impair`).
     #[arg(long, value_name = "SPEC")]
     impair: Option<Impairment>,
+    /// Reconnect to a server that went away for up to this many seconds
+    /// (0: end with the session).
+    #[arg(long, default_value_t = 30.0, value_name = "SECONDS")]
+    reconnect_for: f64,
 }
 
 /// An error ends the process with one line on stderr (the whole chain, no
@@ -339,6 +347,7 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
         seconds,
         dump_to,
         impair,
+        reconnect_for,
     } = args;
     let pin = match (pin, pin_file, dangerous_accept_any_certificate) {
         (Some(hex), _, _) => Pin::Sha256(hex),
@@ -355,7 +364,8 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
     };
     let runtime = tokio::runtime::Runtime::new()?;
     runtime.block_on(async move {
-        let (mut session, relay) = connect_impaired(ConnectConfig::new(addr, pin, token), impair).await?;
+        let config = ConnectConfig::new(addr, pin, token);
+        let (mut session, relay) = connect_impaired(config, impair, reconnect_for).await?;
         let w = &session.welcome;
         println!(
             "session {} with {}: {}x{} at {} fps, buffers {:?}, window {:?}",
@@ -385,7 +395,7 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
                 w.write_frame(&frame)?;
             }
             if count % 30 == 0 {
-                let s = session.stats();
+                let s = session.stats().session;
                 eprintln!(
                     "{count} frames, {:.1} fps, {:.1} MB, rtt {:.1} ms, late {}, dropped {}",
                     count as f64 / started.elapsed().as_secs_f64(),
@@ -396,9 +406,16 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
                 );
             }
         }
-        let s = session.stats();
-        if let Some(reason) = session.close_reason() {
-            println!("connection closed: {reason}");
+        let outages = session.stats();
+        let s = outages.session;
+        if let Some(reason) = session.ended() {
+            println!("stream ended: {reason}");
+        }
+        if outages.reconnects > 0 {
+            println!(
+                "reconnected {} times after {:.0} ms without a server in all (longest {:.0} ms)",
+                outages.reconnects, outages.outage_ms, outages.longest_outage_ms
+            );
         }
         println!(
             "received {count} frames in {:.2} s; {} bytes; late {}, dropped {}; server reports sent {}, dropped {}",
@@ -420,11 +437,13 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
 }
 
 /// Connects as `config` says, through an impairment relay when `impair`
-/// is given (the relay must outlive the session).
+/// is given (the relay must outlive the stream), reconnecting for up to
+/// `reconnect_for` seconds when the server goes away.
 async fn connect_impaired(
     mut config: ConnectConfig,
     impair: Option<Impairment>,
-) -> anyhow::Result<(client::Session, Option<Relay>)> {
+    reconnect_for: f64,
+) -> anyhow::Result<(client::Stream, Option<Relay>)> {
     let relay = match impair {
         Some(imp) => {
             let relay = Relay::start(config.addr, imp).await?;
@@ -434,7 +453,15 @@ async fn connect_impaired(
         }
         None => None,
     };
-    Ok((client::connect(config).await?, relay))
+    let policy = if reconnect_for > 0.0 && reconnect_for.is_finite() {
+        client::ReconnectPolicy {
+            give_up_after: Duration::from_secs_f64(reconnect_for),
+            ..client::ReconnectPolicy::default()
+        }
+    } else {
+        client::ReconnectPolicy::NEVER
+    };
+    Ok((client::Stream::connect(config, policy).await?, relay))
 }
 
 /// What the impairment relay did, both ways.
@@ -522,7 +549,7 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             }
             (None, None) => unreachable!("a local server exists without --server"),
         };
-        let (mut session, relay) = connect_impaired(config, args.impair).await?;
+        let (mut session, relay) = connect_impaired(config, args.impair, args.reconnect_for).await?;
         let gpu = match args.backend.as_str() {
             "cpu" => None,
             wanted => match client::demo::gpu() {
@@ -581,6 +608,16 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             report.restarts,
         );
         print!("{}", report.summary.to_text());
+        if let Some(o) = Some(report.outages).filter(|o| o.reconnects > 0 || o.in_outage) {
+            println!(
+                "  outages: {} reconnects, {} failed attempts, {:.0} ms without a server (longest {:.0} ms){}",
+                o.reconnects,
+                o.failed_attempts,
+                o.outage_ms,
+                o.longest_outage_ms,
+                if o.in_outage { ", in an outage at the end" } else { "" }
+            );
+        }
         report_relay(relay.as_ref());
         if let Some(path) = &args.json {
             std::fs::write(path, serde_json::to_vec_pretty(&report)?)?;

@@ -29,7 +29,7 @@ use framegen::{FrameGenerator, GpuContext, Method, PushOutcome, Settings};
 use protocol::Frame;
 use serde::Serialize;
 
-use crate::Session;
+use crate::reconnect::{Stream, StreamStats};
 
 /// What the presenter does.
 #[derive(Clone, Debug)]
@@ -103,13 +103,15 @@ pub struct Report {
     pub restarts: u64,
     /// Latency summary.
     pub summary: Summary,
+    /// Reconnections and outages.
+    pub outages: StreamStats,
     /// Every displayed frame.
     pub records: Vec<Record>,
 }
 
 /// Presents `session` headless for `config.duration`.
 pub async fn run_headless(
-    session: &mut Session,
+    session: &mut Stream,
     config: &PresentConfig,
     gpu: Option<Arc<GpuContext>>,
 ) -> anyhow::Result<Report> {
@@ -249,7 +251,7 @@ pub async fn run_headless(
                 writer.write_frame(&shown)?;
             }
             if let (Some(sink), Some(image)) = (&config.window, &image) {
-                let rtt = session.stats().client.rtt_us as f64 / 1000.0;
+                let rtt = session.stats().session.client.rtt_us as f64 / 1000.0;
                 let stats = overlay(
                     &accounting,
                     received,
@@ -288,6 +290,7 @@ pub async fn run_headless(
         ingest_ms: Percentiles::of(pusher.ingest_ms),
         restarts: pusher.restarts,
         summary,
+        outages: session.stats(),
         records: accounting.records().to_vec(),
     })
 }

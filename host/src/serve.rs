@@ -19,6 +19,7 @@ use tokio::sync::{Semaphore, broadcast};
 
 use crate::session::{self, Policy};
 use crate::source::Feed;
+use crate::tls::Identity;
 
 /// Most frame streams one client may have open at once.
 pub const MAX_IN_FLIGHT: usize = 3;
@@ -81,7 +82,7 @@ impl Server {
     /// passes `policy`.
     pub fn start(
         addr: SocketAddr,
-        config: quinn::ServerConfig,
+        identity: &Identity,
         policy: Policy,
         feed: Feed,
     ) -> std::io::Result<Self> {
@@ -91,7 +92,15 @@ impl Server {
                 "the access token is empty: it would admit no one (or, compared naively, anyone)",
             ));
         }
-        let endpoint = quinn::Endpoint::server(config, addr)?;
+        let config = identity
+            .quic_server_config()
+            .map_err(std::io::Error::other)?;
+        let endpoint = quinn::Endpoint::new(
+            identity.quic_endpoint_config(),
+            Some(config),
+            std::net::UdpSocket::bind(addr)?,
+            Arc::new(quinn::TokioRuntime),
+        )?;
         let counters = Arc::new(ServerCounters::default());
         let accept = tokio::spawn(accept_loop(
             endpoint.clone(),

@@ -416,8 +416,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         let source = Source::start(args.source, buffers, frames.clone())?;
         (Feed::Live(frames), Some(source))
     };
-    let server =
-        host::serve::Server::start(args.listen, identity.quic_server_config()?, policy, feed)?;
+    let server = host::serve::Server::start(args.listen, &identity, policy, feed)?;
     println!("listening on {}", server.local_addr()?);
     println!("certificate SHA-256: {}", identity.fingerprint());
     println!("token: {token}");

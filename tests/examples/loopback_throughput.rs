@@ -67,7 +67,7 @@ async fn main() -> anyhow::Result<()> {
         let tx = Source::channel();
         let server = Server::start(
             "127.0.0.1:0".parse()?,
-            identity.quic_server_config()?,
+            &identity,
             policy,
             Feed::Live(tx.clone()),
         )?;

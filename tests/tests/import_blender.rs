@@ -99,13 +99,7 @@ async fn a_blender_render_streams_without_import() {
         },
         buffers,
     };
-    let server = Server::start(
-        "127.0.0.1:0".parse().unwrap(),
-        identity.quic_server_config().unwrap(),
-        policy,
-        feed,
-    )
-    .unwrap();
+    let server = Server::start("127.0.0.1:0".parse().unwrap(), &identity, policy, feed).unwrap();
     let config = client::ConnectConfig::new(
         server.local_addr().unwrap(),
         client::Pin::Sha256(identity.fingerprint()),

@@ -66,7 +66,7 @@ async fn fixture_with(buffers: Vec<StreamBuffer>, max_sessions: usize) -> Fixtur
     let frames = Source::channel();
     let server = Server::start(
         "127.0.0.1:0".parse().unwrap(),
-        identity.quic_server_config().unwrap(),
+        &identity,
         policy,
         Feed::Live(frames.clone()),
     )
@@ -191,7 +191,7 @@ async fn wrong_token_pin_and_version_are_refused_with_the_reason() {
     };
     let started = Server::start(
         "127.0.0.1:0".parse().unwrap(),
-        fx.identity.quic_server_config().unwrap(),
+        &fx.identity,
         open,
         Feed::Live(Source::channel()),
     );
@@ -463,13 +463,7 @@ async fn a_dump_replays_from_the_start_for_every_session() {
         },
         buffers: fx.buffers.clone(),
     };
-    let replay = Server::start(
-        "127.0.0.1:0".parse().unwrap(),
-        fx.identity.quic_server_config().unwrap(),
-        policy,
-        feed,
-    )
-    .unwrap();
+    let replay = Server::start("127.0.0.1:0".parse().unwrap(), &fx.identity, policy, feed).unwrap();
     let mut config = fx.config();
     config.addr = replay.local_addr().unwrap();
     let originals: Vec<Frame> = DumpReader::open(&fx.dump)
@@ -667,4 +661,144 @@ async fn frames_cross_an_impaired_network_intact_and_in_order() {
     assert!(relay.upstream.snapshot().1 > 0 || relay.upstream.snapshot().0 > 0);
     session.close().await;
     fx.server.shutdown().await;
+}
+
+/// A server in a runtime of its own, so that the test can kill it: the
+/// runtime's end drops every task and socket with nothing sent, as a killed
+/// process would. The same port is bound again as soon as it is free.
+fn server_in_runtime(
+    addr: SocketAddr,
+    identity: &Identity,
+    feed: Feed,
+) -> (tokio::runtime::Runtime, Server) {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let policy = Policy {
+        token: TOKEN.into(),
+        server_name: "restarting".into(),
+        size: SIZE,
+        max_frame: SIZE,
+        fps: REPLAY_FPS,
+        buffers: StreamBuffer::default_set(Codec::Zstd).to_vec(),
+        window_mode: WindowMode::Off,
+        max_sessions: host::session::DEFAULT_MAX_SESSIONS,
+    };
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    let server = loop {
+        let _inside = runtime.enter();
+        match Server::start(addr, identity, policy.clone(), feed.clone()) {
+            Ok(s) => break s,
+            Err(e) if std::time::Instant::now() < deadline => {
+                eprintln!("port {addr} not free yet: {e}");
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(e) => panic!("{e}"),
+        }
+    };
+    (runtime, server)
+}
+
+/// The server is killed mid-stream and restarted on the same port with the
+/// same identity, then shut down and restarted 2.5 s later (issue 18 §9): the
+/// stream resumes within 2 s of the server being back each time, its frames
+/// continue the old ones (indices increasing, the first one a cut), and it
+/// counts the outages. The killed server's successor answers the client's
+/// packets with a stateless reset, so the client does not wait out its idle
+/// timeout.
+#[test]
+fn a_stream_resumes_when_its_server_comes_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("dump");
+    write_dump(&dump);
+    let identity = Identity::load_or_create(&dir.path().join("identity")).unwrap();
+    let frames = Source::channel();
+    let _source = Source::start(
+        SourceSpec::Dump {
+            dir: dump,
+            looped: true,
+        },
+        StreamBuffer::default_set(Codec::Zstd).to_vec(),
+        frames.clone(),
+    )
+    .unwrap();
+    let feed = Feed::Live(frames);
+    let (runtime, server) =
+        server_in_runtime("127.0.0.1:0".parse().unwrap(), &identity, feed.clone());
+    let addr = server.local_addr().unwrap();
+    let client = tokio::runtime::Runtime::new().unwrap();
+    let config = ConnectConfig::new(addr, Pin::Sha256(identity.fingerprint()), TOKEN);
+    let mut stream = client
+        .block_on(client::Stream::connect(
+            config,
+            client::ReconnectPolicy::default(),
+        ))
+        .unwrap();
+    let next = |stream: &mut client::Stream, within: Duration| {
+        client
+            .block_on(async { tokio::time::timeout(within, stream.frames.recv()).await })
+            .unwrap_or_else(|_| {
+                panic!(
+                    "no frame in {within:?}: {:?}, {:?}",
+                    stream.stats(),
+                    stream.ended()
+                )
+            })
+            .expect("the stream goes on")
+            .frame
+            .meta
+    };
+    let mut last = 0;
+    for _ in 0..5 {
+        last = next(&mut stream, Duration::from_secs(10)).index;
+    }
+
+    // Killed: nothing sent, every task and socket dropped.
+    drop(server);
+    runtime.shutdown_background();
+    std::thread::sleep(Duration::from_secs(1));
+    let (runtime, server) = server_in_runtime(addr, &identity, feed.clone());
+    let back = std::time::Instant::now();
+    let first = next(&mut stream, Duration::from_secs(2));
+    let resumed = back.elapsed();
+    assert!(first.cut && first.index > last, "{first:?} after {last}");
+    assert!(resumed < Duration::from_secs(2), "{resumed:?}");
+    let stats = stream.stats();
+    assert_eq!(stats.reconnects, 1, "{stats:?}");
+    assert!(stats.outage_ms >= 1000.0, "{stats:?}");
+    eprintln!("killed: resumed {resumed:?} after the server was back; {stats:?}");
+
+    // Shut down politely (the client hears it at once), and away for
+    // 2.5 s: attempts fail meanwhile, each cut short.
+    last = next(&mut stream, Duration::from_secs(2)).index;
+    runtime.block_on(server.shutdown());
+    drop(runtime);
+    std::thread::sleep(Duration::from_millis(2500));
+    let (runtime, server) = server_in_runtime(addr, &identity, feed);
+    let back = std::time::Instant::now();
+    let mut first = next(&mut stream, Duration::from_secs(2));
+    // A frame the client had before the shutdown, delivered after it.
+    while !first.cut {
+        assert!(first.index > last);
+        last = first.index;
+        first = next(&mut stream, Duration::from_secs(2));
+    }
+    assert!(first.index > last);
+    let resumed = back.elapsed();
+    assert!(resumed < Duration::from_secs(2), "{resumed:?}");
+    let stats = stream.stats();
+    assert_eq!(stats.reconnects, 2, "{stats:?}");
+    assert!(stats.failed_attempts >= 1, "{stats:?}");
+    assert!(stats.longest_outage_ms >= 2500.0, "{stats:?}");
+    assert!(!stats.in_outage && stream.ended().is_none());
+    eprintln!("shut down: resumed {resumed:?} after the server was back; {stats:?}");
+
+    // Frames not taken fill the queue; closing still ends at once.
+    std::thread::sleep(Duration::from_secs(1));
+    client
+        .block_on(async { tokio::time::timeout(Duration::from_secs(5), stream.close()).await })
+        .expect("a stream with a full queue closes");
+    runtime.block_on(server.shutdown());
 }
