@@ -11,7 +11,7 @@ use glam::DVec3;
 use protocol::assemble::encode_frame;
 use protocol::codec::{Codec, DEFAULT_ZSTD_LEVEL};
 use protocol::dump::{DumpWriter, Manifest, frame_paths};
-use protocol::wire::{self, Hello, Message, StreamBuffer, WIRE_VERSION};
+use protocol::wire::{self, Hello, Message, StreamBuffer, WIRE_VERSION, WindowMode};
 use protocol::{FrameSize, PixelFormat};
 
 const SIZE: FrameSize = FrameSize::new(16, 9);
@@ -23,6 +23,21 @@ fn format_index(format: PixelFormat) -> u8 {
         .iter()
         .position(|&f| f == format)
         .expect("every format is in ALL") as u8
+}
+
+/// `bytes` as the receiver target's events on `stream`: data events (an op
+/// byte, a length byte for `len × 16 + 1` bytes, the bytes), then its end.
+fn events(stream: u8, bytes: &[u8]) -> Vec<Vec<u8>> {
+    let mut out = vec![];
+    let mut rest = bytes;
+    while !rest.is_empty() {
+        let len = ((rest.len() - 1) / 16).min(15);
+        let (chunk, tail) = rest.split_at(len * 16 + 1);
+        out.push([&[stream << 2, len as u8][..], chunk].concat());
+        rest = tail;
+    }
+    out.push(vec![stream << 2 | 1]);
+    out
 }
 
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
@@ -64,16 +79,42 @@ fn main() -> anyhow::Result<()> {
             }
         }
     }
-    let hello = Message::Hello(Hello {
-        version: WIRE_VERSION,
-        client_name: "seed".into(),
-        token: "token".into(),
-        codecs: vec![Codec::Raw, Codec::Zstd],
-        max_size: FrameSize::new(8192, 8192),
-        window_modes: vec![],
-        extras: vec![],
-    });
-    write(&out.join("decode"), "hello", &wire::encode(&hello)?)?;
+    let streams = frames
+        .iter()
+        .map(|f| {
+            encode_frame(
+                f,
+                &StreamBuffer::default_set(Codec::Zstd),
+                DEFAULT_ZSTD_LEVEL,
+            )?
+            .to_stream_bytes()
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    // The receiver target's events (see `fuzz/fuzz_targets/receiver.rs`):
+    // frame 0 then frame 1, each on its stream to its end; and frame 1
+    // overtaking frame 0, interleaved chunk by chunk.
+    let in_order = [events(0, &streams[0]), events(1, &streams[1])].concat();
+    write(&out.join("receiver"), "in-order", &in_order.concat())?;
+    let (late, early) = (events(2, &streams[0]), events(3, &streams[1]));
+    let mut overtaken = vec![];
+    for k in 0..late.len().max(early.len()) {
+        for e in [early.get(k), late.get(k)].into_iter().flatten() {
+            overtaken.extend_from_slice(e);
+        }
+    }
+    write(&out.join("receiver"), "overtaken", &overtaken)?;
+    for (target, token) in [("decode", "token"), ("hello", "fuzz-token")] {
+        let hello = Message::Hello(Hello {
+            version: WIRE_VERSION,
+            client_name: "seed".into(),
+            token: token.into(),
+            codecs: vec![Codec::Raw, Codec::Zstd],
+            max_size: FrameSize::new(8192, 8192),
+            window_modes: vec![WindowMode::KeepDensity, WindowMode::KeepSize],
+            extras: vec![],
+        });
+        write(&out.join(target), "hello", &wire::encode(&hello)?)?;
+    }
     let dump = tempfile::tempdir()?;
     let mut writer = DumpWriter::create(dump.path(), Manifest::new(60.0, SIZE, "fuzz seed"))?;
     writer.write_frame(&frames[0])?;
