@@ -9,7 +9,7 @@ use std::sync::Arc;
 use host::serve::Server;
 use host::session::Policy;
 use host::source::{Feed, Source, SourceSpec};
-use host::tls::Identity;
+use host::tls::{Congestion, Identity};
 use protocol::Codec;
 use protocol::FrameSize;
 use protocol::wire::{StreamBuffer, WindowMode};
@@ -32,9 +32,29 @@ pub struct LocalServer {
 }
 
 /// Starts a server on 127.0.0.1 (a free port) rendering `scene` live at
-/// `size` and `fps`.
-pub fn start_local(scene: &str, size: FrameSize, fps: f64) -> anyhow::Result<LocalServer> {
-    start_local_windowed(scene, size, fps, WindowMode::Off)
+/// `size` and `fps`, its frames sent under `congestion` control.
+pub fn start_local(
+    scene: &str,
+    size: FrameSize,
+    fps: f64,
+    congestion: Congestion,
+) -> anyhow::Result<LocalServer> {
+    start_local_from(
+        scene_spec(scene, size, fps, WindowSettings::default()),
+        (size, fps),
+        WindowSettings::default(),
+        congestion,
+    )
+}
+
+fn scene_spec(scene: &str, size: FrameSize, fps: f64, window: WindowSettings) -> SourceSpec {
+    SourceSpec::Scene {
+        spec: scene.into(),
+        size,
+        fps,
+        window,
+        base: std::path::PathBuf::from("."),
+    }
 }
 
 /// [`start_local`] with the adaptive rendering window in `mode` (GFFE §4.3).
@@ -49,22 +69,20 @@ pub fn start_local_windowed(
         ..WindowSettings::default()
     };
     start_local_from(
-        SourceSpec::Scene {
-            spec: scene.into(),
-            size,
-            fps,
-            window,
-            base: std::path::PathBuf::from("."),
-        },
+        scene_spec(scene, size, fps, window),
         (size, fps),
         window,
+        Congestion::default(),
     )
 }
 
 /// Starts a server on 127.0.0.1 replaying the dump in `dir` (looped, as one
 /// live stream) at its own size and rate: a native dump, a Blender render or
 /// an Unreal capture.
-pub fn start_local_dump(dir: &std::path::Path) -> anyhow::Result<LocalServer> {
+pub fn start_local_dump(
+    dir: &std::path::Path,
+    congestion: Congestion,
+) -> anyhow::Result<LocalServer> {
     let dump = protocol::import::AnyDump::open(dir)?;
     start_local_from(
         SourceSpec::Dump {
@@ -73,6 +91,7 @@ pub fn start_local_dump(dir: &std::path::Path) -> anyhow::Result<LocalServer> {
         },
         (dump.size(), dump.fps()),
         WindowSettings::default(),
+        congestion,
     )
 }
 
@@ -80,6 +99,7 @@ fn start_local_from(
     spec: SourceSpec,
     (size, fps): (FrameSize, f64),
     window: WindowSettings,
+    congestion: Congestion,
 ) -> anyhow::Result<LocalServer> {
     let identity_dir = tempfile::tempdir()?;
     let identity = Identity::load_or_create(identity_dir.path())?;
@@ -94,6 +114,7 @@ fn start_local_from(
         buffers: buffers.clone(),
         window_mode: window.mode,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
+        congestion,
     };
     let frames = Source::channel();
     let source = Source::start(spec, buffers, frames.clone())?;

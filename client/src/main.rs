@@ -109,6 +109,10 @@ struct RunArgs {
     /// (0: end with the session), presenting what is there meanwhile.
     #[arg(long, default_value_t = 30.0, value_name = "SECONDS")]
     reconnect_for: f64,
+    /// Congestion control of the in-process server's frames: cubic or bbr
+    /// (as `server serve --congestion`).
+    #[arg(long, default_value = "cubic")]
+    congestion: host::tls::Congestion,
 }
 
 impl Default for RunArgs {
@@ -528,14 +532,14 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             None => match &args.from_dump {
                 Some(dir) => {
                     println!("starting an in-process server replaying {}", dir.display());
-                    Some(client::demo::start_local_dump(dir)?)
+                    Some(client::demo::start_local_dump(dir, args.congestion)?)
                 }
                 None => {
                     println!(
                         "starting an in-process server: {} at {}x{}, {} fps",
                         args.scene, args.size.width, args.size.height, args.fps
                     );
-                    Some(client::demo::start_local(&args.scene, args.size, args.fps)?)
+                    Some(client::demo::start_local(&args.scene, args.size, args.fps, args.congestion)?)
                 }
             },
         };

@@ -21,6 +21,7 @@ fuzz_target!(|data: &[u8]| {
         buffers: StreamBuffer::default_set(Codec::Zstd).to_vec(),
         window_mode: WindowMode::KeepDensity,
         max_sessions: 1,
+        congestion: host::tls::Congestion::default(),
     };
     let mut decoder = Decoder::accepting(Limits::control(), &[MessageKind::Hello]);
     decoder.feed(data);

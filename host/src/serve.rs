@@ -93,7 +93,7 @@ impl Server {
             ));
         }
         let config = identity
-            .quic_server_config()
+            .quic_server_config(policy.congestion)
             .map_err(std::io::Error::other)?;
         let endpoint = quinn::Endpoint::new(
             identity.quic_endpoint_config(),

@@ -27,6 +27,8 @@ pub struct Policy {
     /// Most sessions served at once; one more is refused with
     /// [`RejectReason::ServerFull`].
     pub max_sessions: usize,
+    /// Congestion control of the frames sent.
+    pub congestion: crate::tls::Congestion,
 }
 
 /// Sessions a server admits by default: a live scene is rendered once for
@@ -149,6 +151,7 @@ mod tests {
             buffers: StreamBuffer::default_set(Codec::Raw).to_vec(),
             window_mode: WindowMode::Off,
             max_sessions: DEFAULT_MAX_SESSIONS,
+            congestion: crate::tls::Congestion::default(),
         }
     }
 

@@ -117,6 +117,11 @@ Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
         /// Most sessions at once; one more is refused as "server full".
         #[arg(long, default_value_t = host::session::DEFAULT_MAX_SESSIONS)]
         max_sessions: usize,
+        /// Congestion control of the frames sent: cubic (loss-based) or bbr
+        /// (model-based: keeps a stream through random loss, starves under
+        /// strongly varying delay; see the README's "Impaired networks").
+        #[arg(long, default_value = "cubic")]
+        congestion: host::tls::Congestion,
     },
     /// Show what a scene declares and which passes it builds.
     #[command(after_help = "Examples:
@@ -220,6 +225,7 @@ fn command(cli: Cli) -> anyhow::Result<()> {
             window,
             color_codec,
             max_sessions,
+            congestion,
         } => {
             let (source, size, fps) = match dump {
                 Some(dir) => {
@@ -254,6 +260,7 @@ fn command(cli: Cli) -> anyhow::Result<()> {
                 window,
                 color_codec,
                 max_sessions,
+                congestion,
             }))
         }
         Command::Inspect { dir } => inspect(&dir),
@@ -376,6 +383,7 @@ struct ServeArgs {
     window: WindowMode,
     color_codec: protocol::Codec,
     max_sessions: usize,
+    congestion: host::tls::Congestion,
 }
 
 async fn serve(args: ServeArgs) -> anyhow::Result<()> {
@@ -399,6 +407,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         buffers: buffers.clone(),
         window_mode: args.window,
         max_sessions: args.max_sessions,
+        congestion: args.congestion,
     };
     // A dump replay without --loop starts afresh for every client; a scene
     // (or a looping dump) is one live stream that clients join.

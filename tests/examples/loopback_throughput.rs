@@ -63,6 +63,7 @@ async fn main() -> anyhow::Result<()> {
             buffers: buffers.clone(),
             window_mode: WindowMode::Off,
             max_sessions: host::session::DEFAULT_MAX_SESSIONS,
+            congestion: host::tls::Congestion::default(),
         };
         let tx = Source::channel();
         let server = Server::start(

@@ -91,6 +91,7 @@ async fn a_blender_render_streams_without_import() {
         buffers: buffers.clone(),
         window_mode: WindowMode::Off,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
+        congestion: host::tls::Congestion::default(),
     };
     let feed = Feed::PerSession {
         spec: SourceSpec::Dump {

@@ -11,7 +11,7 @@ use glam::DVec3;
 use host::serve::Server;
 use host::session::Policy;
 use host::source::{Feed, Source, SourceSpec, StreamFrame};
-use host::tls::Identity;
+use host::tls::{Congestion, Identity};
 use protocol::dump::{DumpReader, DumpWriter, Manifest};
 use protocol::wire::{RejectReason, StreamBuffer, WindowMode};
 use protocol::{Codec, Frame, FrameSize};
@@ -49,6 +49,14 @@ async fn fixture(buffers: Vec<StreamBuffer>) -> Fixture {
 }
 
 async fn fixture_with(buffers: Vec<StreamBuffer>, max_sessions: usize) -> Fixture {
+    fixture_under(buffers, max_sessions, Congestion::default()).await
+}
+
+async fn fixture_under(
+    buffers: Vec<StreamBuffer>,
+    max_sessions: usize,
+    congestion: Congestion,
+) -> Fixture {
     let dir = tempfile::tempdir().unwrap();
     let dump = dir.path().join("dump");
     write_dump(&dump);
@@ -62,6 +70,7 @@ async fn fixture_with(buffers: Vec<StreamBuffer>, max_sessions: usize) -> Fixtur
         buffers: buffers.clone(),
         window_mode: WindowMode::Off,
         max_sessions,
+        congestion,
     };
     let frames = Source::channel();
     let server = Server::start(
@@ -188,6 +197,7 @@ async fn wrong_token_pin_and_version_are_refused_with_the_reason() {
         buffers: fx.buffers.clone(),
         window_mode: WindowMode::Off,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
+        congestion: Congestion::default(),
     };
     let started = Server::start(
         "127.0.0.1:0".parse().unwrap(),
@@ -362,7 +372,7 @@ async fn fake_server(
     streams: Vec<Vec<u8>>,
 ) -> (SocketAddr, tokio::task::JoinHandle<()>) {
     let endpoint = quinn::Endpoint::server(
-        identity.quic_server_config().unwrap(),
+        identity.quic_server_config(Congestion::default()).unwrap(),
         "127.0.0.1:0".parse().unwrap(),
     )
     .unwrap();
@@ -455,6 +465,7 @@ async fn a_dump_replays_from_the_start_for_every_session() {
         buffers: fx.buffers.clone(),
         window_mode: WindowMode::Off,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
+        congestion: Congestion::default(),
     };
     let feed = Feed::PerSession {
         spec: SourceSpec::Dump {
@@ -607,7 +618,14 @@ async fn a_full_server_says_so() {
 /// shown.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn frames_cross_an_impaired_network_intact_and_in_order() {
-    let fx = fixture(StreamBuffer::default_set(Codec::Zstd).to_vec()).await;
+    for congestion in [Congestion::Cubic, Congestion::Bbr] {
+        frames_cross_an_impaired_network(congestion).await;
+    }
+}
+
+async fn frames_cross_an_impaired_network(congestion: Congestion) {
+    let buffers = StreamBuffer::default_set(Codec::Zstd).to_vec();
+    let fx = fixture_under(buffers, host::session::DEFAULT_MAX_SESSIONS, congestion).await;
     let imp: client::impair::Impairment = "loss=1%,delay=5ms,jitter=2ms,reorder=0.5%,seed=3"
         .parse()
         .unwrap();
@@ -631,7 +649,7 @@ async fn frames_cross_an_impaired_network_intact_and_in_order() {
         .collect();
     let stats = session.stats().client;
     eprintln!(
-        "impaired link: {} of {FRAMES} frames shown, {} late, server dropped {}, relay {:?} / {:?}",
+        "impaired link, {congestion:?}: {} of {FRAMES} frames shown, {} late, server dropped {}, relay {:?} / {:?}",
         got.len(),
         stats.frames_late,
         fx.server
@@ -685,6 +703,7 @@ fn server_in_runtime(
         buffers: StreamBuffer::default_set(Codec::Zstd).to_vec(),
         window_mode: WindowMode::Off,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
+        congestion: Congestion::default(),
     };
     let deadline = std::time::Instant::now() + Duration::from_secs(5);
     let server = loop {
