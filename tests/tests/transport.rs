@@ -659,10 +659,11 @@ async fn frames_cross_an_impaired_network(congestion: Congestion) {
         relay.downstream.snapshot(),
         relay.upstream.snapshot()
     );
-    // Here 16 or 17 of the 24 arrive: the server drops a frame for a client
-    // with MAX_IN_FLIGHT frames unacknowledged, and a lost datagram at a
-    // frame's tail is found only by a probe timeout.
-    assert!(got.len() >= FRAMES as usize / 3, "{} frames", got.len());
+    // Here 14 to 17 of the 24 arrive under Cubic, 22 under BBR: the server
+    // drops a frame for a client with MAX_IN_FLIGHT frames unacknowledged,
+    // and Cubic's window shrinks at each loss. The bound is loose: this test
+    // is about integrity and order, on a loaded machine.
+    assert!(got.len() >= FRAMES as usize / 4, "{} frames", got.len());
     assert!(got.windows(2).all(|w| w[0].meta.index < w[1].meta.index));
     for f in &got {
         assert!(
