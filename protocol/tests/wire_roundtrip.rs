@@ -264,7 +264,7 @@ fn unexpected_kinds_are_refused_from_the_header() -> Result<(), WireError> {
 /// payload larger than such a frame's largest buffer, is refused from the
 /// bytes that announce it.
 #[test]
-fn limits_for_the_agreed_frames_are_tight() {
+fn limits_for_the_agreed_frames_are_tight() -> Result<(), WireError> {
     let max = protocol::FrameSize::new(160, 90);
     let limits = Limits::for_frames(max);
     assert_eq!(limits.max_dimension, 160);
@@ -291,17 +291,17 @@ fn limits_for_the_agreed_frames_are_tight() {
         frame_index: 0,
         kind: protocol::BufferKind::Color,
         data: vec![0; limits.max_payload as usize + 64],
-    }))
-    .unwrap();
+    }))?;
     assert!(matches!(
         decode_message(&payload[..HEADER_LEN], &limits),
         Err(WireError::TooLong { .. })
     ));
+    Ok(())
 }
 
 /// A welcome whose largest frame is smaller than its size is refused.
 #[test]
-fn a_welcome_largest_frame_covers_its_size() {
+fn a_welcome_largest_frame_covers_its_size() -> Result<(), WireError> {
     let welcome = |max_frame| {
         encode(&Message::Welcome(Welcome {
             session_id: 1,
@@ -312,10 +312,10 @@ fn a_welcome_largest_frame_covers_its_size() {
             window_mode: WindowMode::KeepDensity,
             max_frame,
         }))
-        .unwrap()
     };
-    let ok = welcome(protocol::FrameSize::new(80, 40));
+    let ok = welcome(protocol::FrameSize::new(80, 40))?;
     assert!(decode_message(&ok, &Limits::default()).is_ok());
-    let e = invalid_reason(&welcome(protocol::FrameSize::new(80, 31)));
+    let e = invalid_reason(&welcome(protocol::FrameSize::new(80, 31))?);
     assert!(matches!(e, ValidationError::OutOfRange(_)), "{e}");
+    Ok(())
 }
