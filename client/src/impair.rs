@@ -53,6 +53,29 @@ pub struct Impairment {
     pub seed: u64,
 }
 
+/// The longest delay or jitter a [`Link`] applies (a larger one is cut to
+/// this).
+pub const MAX_DELAY: Duration = Duration::from_secs(3600);
+
+impl Impairment {
+    /// The same impairment with every field inside what a link can apply:
+    /// chances clamped to 0..=1 (NaN: 0), delay and jitter to
+    /// [`MAX_DELAY`], a rate of at least 1 bit/s. The command line refuses
+    /// values outside these; a library caller gets them clamped, never a
+    /// panic in the link.
+    pub fn bounded(self) -> Self {
+        let chance = |p: f64| if p.is_nan() { 0.0 } else { p.clamp(0.0, 1.0) };
+        Self {
+            loss: chance(self.loss),
+            reorder: chance(self.reorder),
+            delay: self.delay.min(MAX_DELAY),
+            jitter: self.jitter.min(MAX_DELAY),
+            rate_bps: self.rate_bps.map(|r| r.max(1)),
+            ..self
+        }
+    }
+}
+
 impl Default for Impairment {
     /// A perfect link: nothing dropped or delayed (netem's queue limit).
     fn default() -> Self {
@@ -242,6 +265,7 @@ impl Link {
     /// A link applying `imp`, its random choices seeded by `imp.seed` and
     /// `stream` (so two directions differ).
     pub fn new(imp: Impairment, stream: u64) -> Self {
+        let imp = imp.bounded();
         Self {
             imp,
             rng: StdRng::seed_from_u64(imp.seed ^ stream.wrapping_mul(0x9e37_79b9_7f4a_7c15)),
@@ -502,6 +526,35 @@ mod tests {
         ] {
             let e = bad.parse::<Impairment>().unwrap_err();
             assert!(matches!(e, ImpairParseError::BadValue { .. }), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn out_of_range_impairments_are_clamped_not_a_panic() {
+        for (loss, reorder) in [(f64::NAN, 2.0), (-1.0, f64::NAN), (7.0, -3.0)] {
+            let imp = Impairment {
+                loss,
+                reorder,
+                delay: Duration::MAX,
+                jitter: Duration::MAX,
+                rate_bps: Some(0),
+                ..Impairment::default()
+            };
+            let b = imp.bounded();
+            assert!((0.0..=1.0).contains(&b.loss) && (0.0..=1.0).contains(&b.reorder));
+            assert_eq!(
+                (b.delay, b.jitter, b.rate_bps),
+                (MAX_DELAY, MAX_DELAY, Some(1))
+            );
+            // Datagrams go through the link without a panic, and none is
+            // due before its 160 bits are on the wire at 1 bit/s.
+            let mut link = Link::new(imp, 0);
+            for i in 0..20 {
+                link.send(MS * i, datagram(i.into(), 20));
+            }
+            assert!(link.poll(Duration::from_secs(60)).is_none());
+            let on_wire = Duration::from_secs(160);
+            assert!(link.next_due().is_none_or(|due| due >= on_wire));
         }
     }
 
