@@ -51,6 +51,9 @@ pub const MAX_EXR_CHANNELS: usize = 64;
 /// Detail of the error reported when the `exr` decoder panics.
 pub const PANIC_DETAIL: &str = "decoder panicked on this file";
 
+/// The error detail of a B44 or B44A compressed file (not read).
+pub const B44_DETAIL: &str = "B44 compression is not read; re-save with ZIP, PIZ or none";
+
 /// The channel list type `exr` wants.
 type SmallChannels = SmallVec<[AnyChannel<FlatSamples>; 4]>;
 
@@ -190,6 +193,15 @@ pub(crate) fn read_planes(
     }
     if header.deep {
         return Err(DumpError::exr_msg(path, "deep data is not a frame"));
+    }
+    // The exr crate's B44 decoder overflows on corrupt blocks (found by
+    // the `files` fuzz target); no dump writer or importer here writes
+    // B44, so it is refused before any block is decoded.
+    if matches!(
+        header.compression,
+        exr::compression::Compression::B44 | exr::compression::Compression::B44A
+    ) {
+        return Err(DumpError::exr_msg(path, B44_DETAIL));
     }
     let count = header.channels.list.len();
     if count > MAX_EXR_CHANNELS {
@@ -341,6 +353,40 @@ mod tests {
                 }
                 Err(e) => panic!("expected TooManyChannels, got {e}"),
                 Ok(_) => panic!("expected TooManyChannels, got planes"),
+            }
+        }
+        Ok(())
+    }
+
+    /// A B44-compressed file (whose decoder the `files` fuzz target made
+    /// overflow on a corrupt block) is refused from its header.
+    #[test]
+    fn b44_is_refused_from_the_header() -> Result<(), Box<dyn std::error::Error>> {
+        let dir = tempfile::tempdir()?;
+        let size = FrameSize::new(16, 8);
+        for (name, compression) in [
+            ("b44.exr", exr::compression::Compression::B44),
+            ("b44a.exr", exr::compression::Compression::B44A),
+        ] {
+            let path = dir.path().join(name);
+            let channels: SmallChannels = ["B", "G", "R"]
+                .into_iter()
+                .map(|c| AnyChannel::new(c, FlatSamples::F16(vec![Half::ONE; 128])))
+                .collect();
+            let layer = Layer::new(
+                (16, 8),
+                LayerAttributes::default(),
+                Encoding {
+                    compression,
+                    ..Encoding::SMALL_LOSSLESS
+                },
+                AnyChannels::sort(channels),
+            );
+            Image::from_layer(layer).write().to_file(&path)?;
+            match read_planes(&path, size, &["R", "G", "B"]) {
+                Err(DumpError::Exr { detail, .. }) => assert_eq!(detail, B44_DETAIL),
+                Err(e) => panic!("expected the B44 refusal, got {e}"),
+                Ok(_) => panic!("expected the B44 refusal, got planes"),
             }
         }
         Ok(())
