@@ -115,6 +115,7 @@ fn start_local_from(
         window_mode: window.mode,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
         congestion,
+        effects: spec.effects()?,
     };
     let frames = Source::channel();
     let source = Source::start(spec, buffers, frames.clone())?;

@@ -46,6 +46,15 @@ struct RunArgs {
     /// Generated frames per rendered frame (display = (n+1) × render rate).
     #[arg(short, long, default_value_t = 1)]
     n: u32,
+    /// No shading correction (GFFE §4.4; gffe), which otherwise runs where
+    /// the stream's effects say shading moves (README, "Shading
+    /// correction").
+    #[arg(long)]
+    no_shading: bool,
+    /// Run every stage of the method, whatever the stream's effects (the
+    /// plan otherwise leaves out what the content does not call for).
+    #[arg(long)]
+    every_stage: bool,
     /// Rendered size (in-process server).
     #[arg(long, default_value = "320x180", value_parser = parse_size)]
     size: FrameSize,
@@ -372,13 +381,21 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
         let (mut session, relay) = connect_impaired(config, impair, reconnect_for).await?;
         let w = &session.welcome;
         println!(
-            "session {} with {}: {}x{} at {} fps, buffers {:?}, window {:?}",
-            w.session_id, w.server_name, w.size.width, w.size.height, w.fps, w.buffers, w.window_mode
+            "session {} with {}: {}x{} at {} fps, buffers {:?}, window {:?}, effects: {}",
+            w.session_id,
+            w.server_name,
+            w.size.width,
+            w.size.height,
+            w.fps,
+            w.buffers,
+            w.window_mode,
+            w.effects
         );
         let mut writer = match &dump_to {
             Some(dir) => Some(DumpWriter::create(
                 dir,
-                Manifest::new(w.fps, w.size, format!("client connect {addr}")),
+                Manifest::new(w.fps, w.size, format!("client connect {addr}"))
+                    .with_effects(w.effects),
             )?),
             None => None,
         };
@@ -575,13 +592,14 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             },
         };
         println!(
-            "presenting {} for {} s ({} -> {} fps, method {})",
+            "presenting {} for {} s ({} -> {} fps, method {}{})",
             if window.is_some() { "in a window" } else { "headless" },
             args.seconds,
             session.welcome.fps,
             args.refresh
                 .unwrap_or(session.welcome.fps * f64::from(args.n + 1)),
-            args.method
+            args.method,
+            if args.no_shading { " without shading correction" } else { "" }
         );
         let config = PresentConfig {
             method: args.method,
@@ -593,6 +611,8 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             window,
             refresh_hz: args.refresh,
             dump_dir: args.dump_to.clone(),
+            shading: !args.no_shading,
+            every_stage: args.every_stage,
         };
         let report = run_headless(&mut session, &config, gpu).await?;
         session.close().await;
@@ -611,6 +631,10 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             report.ingest_ms.p99,
             report.restarts,
         );
+        println!("  plan: {}", report.plan);
+        if !report.passes.is_empty() {
+            println!("  passes: {}", report.passes.join(", "));
+        }
         print!("{}", report.summary.to_text());
         if let Some(o) = Some(report.outages).filter(|o| o.reconnects > 0 || o.in_outage) {
             println!(

@@ -52,6 +52,13 @@ pub struct PresentConfig {
     pub refresh_hz: Option<f64>,
     /// Write every presented frame into a dump here.
     pub dump_dir: Option<PathBuf>,
+    /// Shading correction (gffe; `framegen::Settings::shading`) where the
+    /// stream's effects call for it.
+    pub shading: bool,
+    /// Every stage of the method, whatever the stream's effects (the
+    /// welcome's effects are ignored: `framegen::Settings::effects` stays
+    /// unknown).
+    pub every_stage: bool,
 }
 
 impl Default for PresentConfig {
@@ -66,6 +73,8 @@ impl Default for PresentConfig {
             window: None,
             refresh_hz: None,
             dump_dir: None,
+            shading: true,
+            every_stage: false,
         }
     }
 }
@@ -107,6 +116,19 @@ pub struct Report {
     pub outages: StreamStats,
     /// Every displayed frame.
     pub records: Vec<Record>,
+    /// The passes of the last generated frame, its rendered frame's ingest
+    /// included, in the order they ran, where the backend times them (the
+    /// CPU reference always, wgpu when profiling; otherwise empty).
+    pub passes: Vec<String>,
+    /// The stages the generator was planned to run, from the method and
+    /// the stream's effects (in words in the JSON).
+    #[serde(serialize_with = "in_words")]
+    pub plan: framegen::pipeline::plan::Plan,
+}
+
+/// Serialises a value as its `Display` text.
+fn in_words<S: serde::Serializer>(value: &impl std::fmt::Display, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(value)
 }
 
 /// Presents `session` headless for `config.duration`.
@@ -133,8 +155,16 @@ pub async fn run_headless(
         n: config.n,
         max_alpha: config.max_alpha.max(1.0),
         display_size: Some((display.width, display.height)),
+        shading: config.shading,
+        effects: if config.every_stage {
+            protocol::Effects::UNKNOWN
+        } else {
+            session.welcome.effects
+        },
         ..Settings::for_method(config.method)
     };
+    let plan = settings.plan();
+    tracing::info!("generation plan: {plan}");
     let mut generator = match (&gpu, config.cpu) {
         (Some(ctx), false) => FrameGenerator::gpu(settings, ctx.clone())?,
         _ => FrameGenerator::cpu(settings)?,
@@ -150,7 +180,8 @@ pub async fn run_headless(
                 display_fps,
                 session.welcome.size,
                 format!("client presented frames ({})", config.method),
-            ),
+            )
+            .with_effects(session.welcome.effects),
         )?),
         None => None,
     };
@@ -194,6 +225,8 @@ pub async fn run_headless(
     };
     let mut kept: VecDeque<Frame> = VecDeque::from([first]);
     let mut generation = Vec::new();
+    // The passes of the last generated frame (ingest and generation).
+    let mut passes = Vec::new();
     let (mut received, mut missed) = (1u64, 0u64);
     let mut k: u64 = 0;
     let last = (config.duration.as_secs_f64() / di.as_secs_f64()).floor() as u64;
@@ -239,7 +272,13 @@ pub async fn run_headless(
                 let due = kept.iter().filter(|f| f.meta.index <= next.id);
                 pusher.push(&mut generator, due)?;
             }
-            let (image, ready_at) = produce(&slot, &mut generator, &kept, &mut generation, start)?;
+            let (image, ready_at) = produce(
+                &slot,
+                &mut generator,
+                &kept,
+                (&mut generation, &mut passes),
+                start,
+            )?;
             if let (Some(dir), Some(image)) = (&config.png_dir, &image) {
                 write_png(dir, slot.display_id, image)?;
             }
@@ -292,6 +331,8 @@ pub async fn run_headless(
         summary,
         outages: session.stats(),
         records: accounting.records().to_vec(),
+        passes: passes.iter().map(|p| p.name().to_string()).collect(),
+        plan,
     })
 }
 
@@ -351,12 +392,13 @@ impl Pusher {
 }
 
 /// The image of a slot and when it was ready (the source frame's ready
-/// time, or the end of generation).
+/// time, or the end of generation). A generated slot adds its time to
+/// `generation` and leaves its passes in `passes`.
 fn produce(
     slot: &Slot,
     generator: &mut FrameGenerator,
     kept: &VecDeque<Frame>,
-    generation: &mut Vec<f64>,
+    (generation, passes): (&mut Vec<f64>, &mut Vec<framegen::pipeline::Pass>),
     start: Instant,
 ) -> anyhow::Result<(Option<Frame>, Option<Duration>)> {
     match slot.kind {
@@ -373,6 +415,8 @@ fn produce(
             let t = Instant::now();
             let g = tokio::task::block_in_place(|| generator.generate(slot.alpha))?;
             generation.push(t.elapsed().as_secs_f64() * 1e3);
+            passes.clear();
+            passes.extend(generator.timings().iter().map(|p| p.pass));
             Ok((Some(g.frame), Some(start.elapsed())))
         }
     }

@@ -271,6 +271,8 @@ fn same_stream(a: &Welcome, b: &Welcome) -> bool {
         && a.buffers == b.buffers
         && a.window_mode == b.window_mode
         && a.max_frame == b.max_frame
+        // The generator was planned for the first session's effects.
+        && a.effects == b.effects
 }
 
 async fn supervise(

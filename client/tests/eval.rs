@@ -39,9 +39,10 @@ fn methods_on_a_scene_and_on_its_dump() {
     // The same frames as a dump (rendered at the display rate).
     let dump = dir.path().join("crossing-dump");
     let scene = scene::Scene::load("builtin:crossing").unwrap();
+    let manifest = Manifest::new(60.0, SIZE, "eval test").with_effects(scene.stream_effects());
     let mut renderer =
         scene::render::Renderer::new(scene, SIZE, std::path::Path::new(".")).unwrap();
-    let mut w = DumpWriter::create(&dump, Manifest::new(60.0, SIZE, "eval test")).unwrap();
+    let mut w = DumpWriter::create(&dump, manifest).unwrap();
     for i in 0..46 {
         w.write_frame(&renderer.render(i, 60.0).unwrap()).unwrap();
     }
@@ -59,6 +60,11 @@ fn methods_on_a_scene_and_on_its_dump() {
     assert!(md.contains("## crossing") && md.contains("★"), "{md}");
     // Per-pass times also in copies of the inputs (the bandwidth floor).
     assert!(md.contains("warp") && md.contains("×)"), "{md}");
+    // What planning the stages saves, against every stage.
+    assert!(
+        md.contains("## Stages planned from the stream's effects"),
+        "{md}"
+    );
     // And the render of the same frames, with every time as a multiple.
     assert!(
         md.contains("rendered in this run") && md.contains("× render"),
@@ -80,9 +86,21 @@ fn methods_on_a_scene_and_on_its_dump() {
     }
 
     let [scene, dumped] = [&report.scenes[0], &report.scenes[1]];
-    // The four methods and the oracle-motion reference beside gffe.
-    assert_eq!(scene.rows.len(), 5);
+    // The four methods, the oracle-motion reference beside gffe, gffe
+    // without shading correction and gffe with every stage.
+    assert_eq!(scene.rows.len(), 7);
     assert_eq!(scene.rows[3].label, client::eval::variant::ORACLE);
+    assert_eq!(scene.rows[5].label, client::eval::variant::NO_SHADING);
+    assert_eq!(scene.rows[6].label, client::eval::variant::EVERY_STAGE);
+    // `crossing` moves objects that cast shadows: its plan is every stage,
+    // shading correction included.
+    assert!(scene.rows[2].shading && !scene.rows[5].shading);
+    assert_eq!(scene.rows[2].plan, scene.rows[6].plan);
+    assert!(
+        scene.rows[2].plan.contains("shade"),
+        "{}",
+        scene.rows[2].plan
+    );
     for row in &scene.rows {
         let q = &row.quality;
         // 8 fed frames, 2 warm up: 6 generated frames compared.
@@ -148,6 +166,14 @@ fn methods_on_a_scene_and_on_its_dump() {
     assert!(gffe.quality.regions[0].share > 0.0);
     assert!(gffe.quality.regions[1].psnr.unwrap() > repeat.quality.regions[1].psnr.unwrap() + 1.0);
     assert_eq!(interp.added_latency_frames, 1);
+    // The focus region (GFFE eq. 3) is the same pixels for every
+    // extrapolator, and none for interpolation (its truths are others).
+    let focus: Vec<f64> = [repeat, by("reproject"), gffe, oracle]
+        .iter()
+        .map(|r| r.quality.focus.share)
+        .collect();
+    assert!(focus.iter().all(|&s| s == focus[0]), "{focus:?}");
+    assert_eq!(interp.quality.focus.share, 0.0);
     // Every backend has a zero-latency front, and only zero-latency
     // variants are on it.
     for b in [BackendKind::Cpu, BackendKind::Wgpu] {

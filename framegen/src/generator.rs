@@ -10,9 +10,9 @@
 //! The passes themselves run on a [`Backend`]: the CPU reference
 //! ([`crate::exec::cpu::CpuBackend`]) or wgpu ([`crate::exec::gpu::GpuBackend`]).
 //!
-//! A seam for GFFE's shading correction (§4.4) is left after the passes:
-//! it takes the generated color, depth and mask, which [`Generated`]
-//! carries.
+//! Which passes run is the settings' [`Plan`](crate::pipeline::plan::Plan):
+//! the method, and the stages the stream's effects call for (shading
+//! correction where shading moves, trajectories where objects move).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -227,6 +227,11 @@ impl FrameGenerator {
         self.sanitized
     }
 
+    /// The stages this generator runs.
+    pub fn plan(&self) -> crate::pipeline::plan::Plan {
+        self.settings.plan()
+    }
+
     /// Pass timings of the last push + generate.
     pub fn timings(&self) -> Vec<PassTime> {
         self.backend.timings()
@@ -301,6 +306,7 @@ impl FrameGenerator {
             epsilon: self.settings.static_epsilon,
             levels,
             tolerance: self.settings.depth_tolerance,
+            shading: self.settings.effective_shading(),
         };
         let mut prev = match (&self.current, restart) {
             (Some(c), None) => {
@@ -444,6 +450,7 @@ impl FrameGenerator {
             pushpull: self.settings.pushpull_levels,
             crop,
             resample: self.settings.resample,
+            shading: self.settings.effective_shading(),
         };
         let interval = cur.prev.map_or(0.0, |p| p.interval(cur.meta.time));
         let meta = FrameMeta {

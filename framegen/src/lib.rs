@@ -41,6 +41,7 @@ pub use gpu::timestamps::PassClock;
 pub use method::{AlphaRange, Descriptor, Method};
 pub use metrics::{MetricsError, psnr, psnr_of_mse, squared_error_map, ssim, ssim_map};
 pub use pipeline::{Backend, IngestPlan, Job, Pass, PassTime, Snapshot};
+pub use protocol::Effects;
 pub use settings::{Resample, Settings};
 
 /// Everything that can go wrong in frame generation.

@@ -1,12 +1,15 @@
 //! What a [`crate::FrameGenerator`] does and with which trade-offs; every
 //! field is one of the knobs the `eval` report sweeps (DESIGN §9).
 
+use protocol::Effects;
+
 use crate::FramegenError;
 use crate::method::History;
 pub use crate::method::Method;
 pub use crate::passes::common::resample::Resample;
 use crate::passes::gffe::background::MAX_LEVELS;
 use crate::passes::gffe::history::MAX_HISTORY;
+use crate::pipeline::plan::Plan;
 
 /// Settings of a generator.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -52,6 +55,15 @@ pub struct Settings {
     /// forward warp (gffe, reproject). Interpolation's resolve reads both
     /// frames with it.
     pub resample: Resample,
+    /// Shading correction (GFFE §4.4, `passes/gffe/shading.rs`): the
+    /// shading change from the previous frame continued to α before the
+    /// warp; gffe only, and only where the stream's effects say shading
+    /// moves ([`Settings::effective_shading`]).
+    pub shading: bool,
+    /// What the stream's content does (issue 17): the generator leaves out
+    /// the stages it does not call for ([`crate::pipeline::plan::Plan`]).
+    /// The default, [`Effects::UNKNOWN`], runs every stage.
+    pub effects: Effects,
 }
 
 impl Default for Settings {
@@ -68,6 +80,8 @@ impl Default for Settings {
             max_alpha: 16.0,
             display_size: None,
             resample: Resample::CatmullRom,
+            shading: true,
+            effects: Effects::UNKNOWN,
         }
     }
 }
@@ -128,15 +142,29 @@ impl Settings {
         Ok(())
     }
 
-    /// `k` as the passes use it: the setting for gffe; 1 (this frame's
-    /// positions and the static test, which detects cuts) for reproject
-    /// and interp; 0 (no tracking) for repeat, which only crops.
+    /// `k` as the passes use it: the setting for gffe in a stream with
+    /// dynamic objects; 1 (this frame's positions and the static test,
+    /// which detects cuts) for gffe without them (camera-only: no
+    /// trajectory to track), reproject and interp; 0 (no tracking) for
+    /// repeat, which only crops.
     pub fn effective_history(&self) -> u32 {
         match self.method.descriptor().history {
-            History::Chain => self.history,
+            History::Chain if self.effects.dynamic_objects => self.history,
+            History::Chain => 1,
             History::Positions => 1,
             History::None => 0,
         }
+    }
+
+    /// Whether shading correction runs: the setting, for gffe, in a
+    /// stream whose shading moves.
+    pub fn effective_shading(&self) -> bool {
+        self.shading && self.method == Method::Gffe && self.effects.moving_shading
+    }
+
+    /// The stages these settings run ([`Plan::of`]).
+    pub fn plan(&self) -> Plan {
+        Plan::of(self)
     }
 
     /// `L` as the passes use it: 0 for the baselines.

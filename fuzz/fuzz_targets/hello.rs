@@ -22,6 +22,7 @@ fuzz_target!(|data: &[u8]| {
         window_mode: WindowMode::KeepDensity,
         max_sessions: 1,
         congestion: host::tls::Congestion::default(),
+        effects: protocol::Effects::UNKNOWN,
     };
     let mut decoder = Decoder::accepting(Limits::control(), &[MessageKind::Hello]);
     decoder.feed(data);

@@ -29,6 +29,8 @@ pub struct Policy {
     pub max_sessions: usize,
     /// Congestion control of the frames sent.
     pub congestion: crate::tls::Congestion,
+    /// What the stream's content does (sent in the welcome).
+    pub effects: protocol::Effects,
 }
 
 /// Sessions a server admits by default: a live scene is rendered once for
@@ -134,6 +136,7 @@ pub fn answer(policy: &Policy, hello: &Hello, session_id: u64) -> Result<Welcome
         buffers: policy.buffers.clone(),
         window_mode: policy.window_mode,
         max_frame: policy.max_frame,
+        effects: policy.effects,
     })
 }
 
@@ -152,6 +155,7 @@ mod tests {
             window_mode: WindowMode::Off,
             max_sessions: DEFAULT_MAX_SESSIONS,
             congestion: crate::tls::Congestion::default(),
+            effects: protocol::Effects::UNKNOWN,
         }
     }
 

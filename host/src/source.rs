@@ -59,6 +59,19 @@ pub enum SourceSpec {
     },
 }
 
+impl SourceSpec {
+    /// What the stream's content does (sent in the welcome, issue 17): a
+    /// scene's from its file, a dump's from its manifest or sidecar
+    /// ([`AnyDump::effects`]). Reads only the scene file or the dump's
+    /// metadata.
+    pub fn effects(&self) -> anyhow::Result<protocol::Effects> {
+        Ok(match self {
+            SourceSpec::Scene { spec, .. } => Scene::load(spec)?.stream_effects(),
+            SourceSpec::Dump { dir, .. } => AnyDump::open(dir)?.effects(),
+        })
+    }
+}
+
 /// Counters of the producer.
 #[derive(Debug, Default)]
 pub struct SourceStats {

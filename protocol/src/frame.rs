@@ -266,6 +266,31 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// Frame `index` at 60 fps of `size`: black, depth 1, no motion, a
+    /// camera at the origin looking down −Z (aspect 2, near 0.1, no far
+    /// plane). A starting point for tests and tools that fill in what they
+    /// need.
+    pub fn blank(index: u64, size: FrameSize) -> Self {
+        let n = size.pixels() as usize;
+        Self {
+            meta: FrameMeta {
+                index,
+                time: index as f64 / 60.0,
+                camera: Camera::new(
+                    crate::Pose::new(glam::DVec3::ZERO, glam::DQuat::IDENTITY),
+                    crate::Projection::perspective(1.0, 2.0, 0.1, f64::INFINITY),
+                ),
+                size,
+                host_processing: Duration::ZERO,
+                cut: false,
+            },
+            color: vec![[f16::ZERO; 4]; n],
+            depth: vec![1.0; n],
+            motion: vec![[0.0; 2]; n],
+            extras: vec![],
+        }
+    }
+
     /// A frame with `meta` and no pixel data yet, for decoders to fill.
     pub fn empty(meta: FrameMeta) -> Self {
         Self {

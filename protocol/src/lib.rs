@@ -7,6 +7,8 @@
 //! * [`wire`]: versioned, length-prefixed messages (bincode 2) and a sans-IO
 //!   decoder; [`assemble`] turns one frame's messages back into a frame.
 //! * [`dump`]: the on-disk dump format (OpenEXR + JSON).
+//! * [`effects`]: what a stream's content does (dynamic objects, moving
+//!   shading), from which the client plans its stages.
 //! * [`import`]: Blender and Unreal dumps converted into the conventions.
 //! * [`display`]: the one fixed display transform (exposure 1, Reinhard,
 //!   sRGB) that presenters, PNG output and quality metrics all use.
@@ -32,12 +34,14 @@ pub mod camera;
 pub mod codec;
 pub mod display;
 pub mod dump;
+pub mod effects;
 pub mod frame;
 pub mod import;
 pub mod wire;
 
 pub use camera::{Camera, Pose, Projected, Projection, Window, WorldPoint};
 pub use codec::{Codec, CodecError};
+pub use effects::Effects;
 pub use frame::{BufferDesc, BufferKind, Frame, FrameMeta, FrameSize, PixelFormat};
 
 /// Version of the data conventions (DESIGN §3). Dumps record it; bump it when

@@ -311,6 +311,7 @@ fn a_welcome_largest_frame_covers_its_size() -> Result<(), WireError> {
             buffers: StreamBuffer::default_set(protocol::Codec::Raw).to_vec(),
             window_mode: WindowMode::KeepDensity,
             max_frame,
+            effects: protocol::Effects::UNKNOWN,
         }))
     };
     let ok = welcome(protocol::FrameSize::new(80, 40))?;

@@ -15,6 +15,11 @@ pub const SCENES: &[(&str, &str)] = &[
     ("translucent", include_str!("../scenes/translucent.ron")),
     ("cut", include_str!("../scenes/cut.ron")),
     ("huge", include_str!("../scenes/huge.ron")),
+    ("sun_sweep", include_str!("../scenes/sun_sweep.ron")),
+    (
+        "spinning_shadow",
+        include_str!("../scenes/spinning_shadow.ron"),
+    ),
 ];
 
 /// `(name, glTF JSON)` of the assets built-in scenes use, as
@@ -57,5 +62,29 @@ mod tests {
             assert_eq!(st.models.len(), s.instances().len());
             assert!(st.eye.is_finite() && st.target.is_finite());
         }
+    }
+
+    /// The effects a stream of each built-in scene announces: dynamic
+    /// where an object is animated, moving shading where a light moves or a
+    /// dynamic object casts a shadow.
+    #[test]
+    fn builtin_stream_effects() {
+        let effects = |name: &str| {
+            Scene::load(&format!("builtin:{name}"))
+                .unwrap_or_else(|e| panic!("{e}"))
+                .stream_effects()
+        };
+        let e = |dynamic_objects, moving_shading| protocol::Effects {
+            dynamic_objects,
+            moving_shading,
+        };
+        assert_eq!(effects("dolly"), protocol::Effects::STATIC);
+        assert_eq!(effects("fast_rotation"), protocol::Effects::STATIC);
+        assert_eq!(effects("moving_light"), e(false, true));
+        assert_eq!(effects("sun_sweep"), e(false, true));
+        assert_eq!(effects("spinning_shadow"), e(true, true));
+        assert_eq!(effects("crossing"), e(true, true));
+        // Moving, but casting no shadow (no `shadows` effect).
+        assert_eq!(effects("translucent"), e(true, false));
     }
 }

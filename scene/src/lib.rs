@@ -459,6 +459,21 @@ impl Scene {
         self.effects.contains(&effect)
     }
 
+    /// What a stream of this scene does, for the client's generation plan
+    /// (issue 17): an object with an animation is dynamic; shading moves
+    /// over surfaces where a light moves, or where shadows fall from
+    /// dynamic objects. Specular highlights also slide with the camera, but
+    /// shading correction gains nothing on them (`translucent` scores the
+    /// same with it and without it), so they do not count.
+    pub fn stream_effects(&self) -> protocol::Effects {
+        let dynamic_objects = self.objects.iter().any(|o| !o.animation.is_empty());
+        protocol::Effects {
+            dynamic_objects,
+            moving_shading: self.has(Effect::MovingLights)
+                || (self.has(Effect::Shadows) && dynamic_objects),
+        }
+    }
+
     /// Every drawn instance (objects expanded by their [`Repeat`]).
     pub fn instances(&self) -> Vec<Instance> {
         let mut out = Vec::new();

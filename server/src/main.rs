@@ -316,6 +316,7 @@ fn record(args: &RecordArgs) -> anyhow::Result<()> {
     );
     anyhow::ensure!(seconds.is_finite() && seconds > 0.0, "seconds must be > 0");
     let scene = Scene::load(spec)?;
+    let effects = scene.stream_effects();
     let frames = (seconds * fps).round().max(1.0) as u64;
     let mut renderer = Renderer::new(scene, size, &scene_base(spec))?;
     renderer.set_window(WindowSettings {
@@ -330,7 +331,8 @@ fn record(args: &RecordArgs) -> anyhow::Result<()> {
         renderer.adapter().backend,
         renderer.passes()
     );
-    let mut writer = DumpWriter::create(out, Manifest::new(fps, size, source))?;
+    let mut writer =
+        DumpWriter::create(out, Manifest::new(fps, size, source).with_effects(effects))?;
     if png {
         std::fs::create_dir_all(out.join("png"))?;
     }
@@ -398,6 +400,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             ..WindowSettings::default()
         },
     );
+    let effects = args.source.effects()?;
     let policy = host::session::Policy {
         token: token.clone(),
         server_name: "framegen-stream server".into(),
@@ -408,6 +411,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         window_mode: args.window,
         max_sessions: args.max_sessions,
         congestion: args.congestion,
+        effects,
     };
     // A dump replay without --loop starts afresh for every client; a scene
     // (or a looping dump) is one live stream that clients join.
@@ -429,6 +433,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     println!("listening on {}", server.local_addr()?);
     println!("certificate SHA-256: {}", identity.fingerprint());
     println!("token: {token}");
+    println!("stream effects (the client plans its stages from them): {effects}");
     println!(
         "connect with: client connect {} --pin {} --token {token}",
         server.local_addr()?,
@@ -470,6 +475,10 @@ fn info(spec: Option<&str>, list: bool) -> anyhow::Result<()> {
     let s = Scene::load(spec)?;
     println!("{} — {}", s.name, s.description);
     println!("effects: {:?}", s.effects);
+    println!(
+        "stream:  {} (the client's generation plan)",
+        s.stream_effects()
+    );
     println!("passes:  {:?}", plan(&s));
     println!("origin:  {:?}", s.origin);
     println!("camera:  fov {}°, {:?}", s.camera.fov_y_deg, s.camera.path);

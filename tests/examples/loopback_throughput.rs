@@ -64,6 +64,7 @@ async fn main() -> anyhow::Result<()> {
             window_mode: WindowMode::Off,
             max_sessions: host::session::DEFAULT_MAX_SESSIONS,
             congestion: host::tls::Congestion::default(),
+            effects: protocol::Effects::UNKNOWN,
         };
         let tx = Source::channel();
         let server = Server::start(

@@ -336,7 +336,9 @@ fn crop_matches() {
     }
 }
 
-/// The whole pipeline, every method, every hard case, α = 0.5 and 2.
+/// The whole pipeline, every method (gffe with every stage, without
+/// shading correction, and camera-only for a stream without dynamic
+/// objects), every hard case, α = 0.5 and 2.
 #[test]
 fn whole_pipeline_matches() {
     whole_pipeline_matches_on(&ctx());
@@ -352,9 +354,20 @@ fn whole_pipeline_matches_on_opengl() {
 }
 
 fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
-    // Every method at its defaults, the warp's other colour filters, and
-    // interpolation's resolve with Catmull-Rom.
+    // Every method at its defaults (gffe with every stage: shading
+    // correction included), the warp's other colour filters,
+    // interpolation's resolve with Catmull-Rom, gffe without shading
+    // correction, and gffe planned for a static world (camera-only
+    // history, k = 1).
     let mut settings: Vec<Settings> = Method::ALL.map(Settings::for_method).to_vec();
+    settings.push(Settings {
+        shading: false,
+        ..Settings::for_method(Method::Gffe)
+    });
+    settings.push(Settings {
+        effects: framegen::Effects::STATIC,
+        ..Settings::for_method(Method::Gffe)
+    });
     for (method, resample) in [
         (Method::Gffe, framegen::Resample::Nearest),
         (Method::Gffe, framegen::Resample::Bilinear),
@@ -388,6 +401,11 @@ fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
                 let a = cpu.generate(alpha).unwrap();
                 let b = gpu.generate(alpha).unwrap();
                 let n = a.mask.len();
+                let label = match (method, s.effective_shading(), s.effective_history()) {
+                    (Method::Gffe, true, _) => "gffe+shading",
+                    (Method::Gffe, false, 1) => "gffe camera-only",
+                    _ => method.name(),
+                };
                 let mask_diff = a.mask.iter().zip(&b.mask).filter(|(x, y)| x != y).count();
                 // A pixel counts as different when its color differs by more
                 // than 1e-3 relative (one flipped winner or static test
@@ -400,15 +418,15 @@ fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
                     .count();
                 let bound = n / 100 + 2;
                 eprintln!(
-                    "{scene} {method} α={alpha}: mask diff {mask_diff}, color diff {color_diff} of {n}"
+                    "{scene} {label} α={alpha}: mask diff {mask_diff}, color diff {color_diff} of {n}"
                 );
                 assert!(
                     mask_diff <= bound,
-                    "{scene} {method} α={alpha}: {mask_diff} mask pixels differ"
+                    "{scene} {label} α={alpha}: {mask_diff} mask pixels differ"
                 );
                 assert!(
                     color_diff <= 2 * bound,
-                    "{scene} {method} α={alpha}: {color_diff} colors differ"
+                    "{scene} {label} α={alpha}: {color_diff} colors differ"
                 );
                 if method != Method::Repeat {
                     assert!(

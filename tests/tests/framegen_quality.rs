@@ -200,3 +200,33 @@ fn interp_beats_repeat_and_on_disocclusion_reproject() {
         );
     }
 }
+
+/// Shading correction (GFFE §4.4, `passes/gffe/shading.rs`) moves the
+/// shading a geometry-aware warp leaves behind: on `moving_light` (a spot
+/// light orbiting static blocks) gffe with it beats gffe without it, on
+/// `spinning_shadow` too, and where no shading moves (`pan`) it changes
+/// nothing measurable. Measured (192x108, CPU): moving_light 35.77 →
+/// 36.60 dB, spinning_shadow 29.05 → 29.27 dB, pan 56.58 dB either way.
+#[test]
+fn shading_correction_moves_the_shading_the_warp_leaves_behind() {
+    // With its effects unknown, gffe runs every stage, shading correction
+    // included.
+    let shaded = Settings::for_method(Method::Gffe);
+    let gffe = Settings {
+        shading: false,
+        ..shaded
+    };
+    for (scene, margin) in [("moving_light", 0.5), ("spinning_shadow", 0.1)] {
+        let frames = recorded(Scene::load(&format!("builtin:{scene}")).unwrap(), 30, 24);
+        let (without, with) = (quality(gffe, &frames), quality(shaded, &frames));
+        eprintln!("{scene}: without {without:?}\nwith {with:?}");
+        assert!(
+            with.psnr > without.psnr + margin,
+            "{scene}: {with:?} vs {without:?}"
+        );
+    }
+    let pan = recorded(Scene::load("builtin:pan").unwrap(), 30, 16);
+    let (without, with) = (quality(gffe, &pan), quality(shaded, &pan));
+    eprintln!("pan: without {without:?}\nwith {with:?}");
+    assert!((with.psnr - without.psnr).abs() < 0.05);
+}

@@ -92,6 +92,7 @@ async fn a_blender_render_streams_without_import() {
         window_mode: WindowMode::Off,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
         congestion: host::tls::Congestion::default(),
+        effects: protocol::Effects::UNKNOWN,
     };
     let feed = Feed::PerSession {
         spec: SourceSpec::Dump {

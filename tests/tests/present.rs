@@ -142,7 +142,12 @@ async fn repeat_shows_only_rendered_and_repeated_frames() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_wgpu_backend_presents_generated_frames() {
     let seconds = 4.0;
-    let r = present_at(WindowMode::Off, 10.0, Method::Gffe, seconds, true, |_| {}).await;
+    // Without shading correction (its cost is not what this checks), as
+    // lavapipe shares the two cores with the server's renderer.
+    let r = present_at(WindowMode::Off, 10.0, Method::Gffe, seconds, true, |c| {
+        c.shading = false
+    })
+    .await;
     assert!(r.backend.starts_with("wgpu"), "{}", r.backend);
     assert!(
         r.summary.rendered >= 1 && r.summary.extrapolated >= 1,
@@ -230,11 +235,20 @@ async fn a_given_refresh_rate_and_a_dump_of_what_was_presented() {
     assert!((r.display_fps - 75.0).abs() < 0.01);
     let slots = (2000.0f64 / (1000.0 / 75.0)).floor() as i64 + 1;
     assert!((r.records.len() as i64 + r.missed_vsyncs as i64 - slots).abs() <= 1);
-    // 75 / 30 = 2.5 slots per rendered frame: α steps of 0.4.
+    // 75 / 30 = 2.5 slots per rendered frame: α steps of 0.4 (which of
+    // them the loaded machine meets varies).
+    let alphas: Vec<f64> = r
+        .records
+        .iter()
+        .filter(|x| x.kind == SlotKind::Extrapolated)
+        .map(|x| x.alpha)
+        .collect();
+    assert!(!alphas.is_empty(), "{:?}", r.summary);
     assert!(
-        r.records
+        alphas
             .iter()
-            .any(|x| x.kind == SlotKind::Extrapolated && (x.alpha - 0.4).abs() < 0.01)
+            .all(|a| *a > 0.2 && ((a / 0.4) - (a / 0.4).round()).abs() < 0.02),
+        "{alphas:?}"
     );
     let reader = protocol::dump::DumpReader::open(&dump).unwrap();
     assert_eq!(reader.len(), r.records.len() as u64);
@@ -252,8 +266,12 @@ async fn windowed_streams_are_presented_as_the_displayed_view() {
         let dir = tempfile::tempdir().unwrap();
         let dump = dir.path().join("presented");
         let target = dump.clone();
+        // Shading correction's cost on two loaded cores is not what this
+        // checks (`the_generation_plan_runs_live` runs it live): without
+        // it, more slots are met.
         let r = present_at(mode, 30.0, Method::Gffe, 2.0, false, move |c| {
             c.dump_dir = Some(target);
+            c.shading = false;
         })
         .await;
         assert_eq!(r.restarts, 1, "{mode:?}: {} restarts", r.restarts);
@@ -268,4 +286,42 @@ async fn windowed_streams_are_presented_as_the_displayed_view() {
         }
         assert!(rendered > 0 && rendered < r.records.len(), "{mode:?}");
     }
+}
+
+/// The generation plan runs live: the stream announces `builtin:default`'s
+/// effects (animated objects, a moving light), so gffe tracks trajectories
+/// and corrects shading, and the CPU reference's pass list of the last
+/// frame is the plan's, in its order; without shading correction neither
+/// of its passes runs.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_generation_plan_runs_live() {
+    let ran = |r: &client::present::Report| -> Vec<String> {
+        r.passes
+            .iter()
+            .filter(|p| *p != "upload" && *p != "readback")
+            .cloned()
+            .collect()
+    };
+    let planned = |r: &client::present::Report| -> Vec<String> {
+        r.plan.passes().map(|p| p.name().to_string()).collect()
+    };
+    let r = present(Method::Gffe, 2.0, false).await;
+    eprintln!(
+        "plan {}; passes {:?}; {}",
+        r.plan,
+        r.passes,
+        r.summary.to_text()
+    );
+    assert_eq!(r.plan.effects, protocol::Effects::UNKNOWN);
+    assert!(r.plan.shading && r.plan.history == 2, "{}", r.plan);
+    assert_eq!(ran(&r), planned(&r));
+    let at = |name: &str| r.passes.iter().position(|p| p == name);
+    let (estimate, correct, warp) = (at("shading"), at("shade"), at("warp"));
+    assert!(estimate.is_some() && correct.is_some(), "{:?}", r.passes);
+    assert!(estimate < correct && correct < warp, "{:?}", r.passes);
+    assert!(r.summary.extrapolated > 0, "{:?}", r.summary);
+    let plain = present_with(Method::Gffe, 1.0, false, |c| c.shading = false).await;
+    assert!(!plain.plan.shading);
+    assert!(!plain.passes.iter().any(|p| p.starts_with("shad")));
+    assert_eq!(ran(&plain), planned(&plain));
 }

@@ -71,6 +71,7 @@ async fn fixture_under(
         window_mode: WindowMode::Off,
         max_sessions,
         congestion,
+        effects: protocol::Effects::UNKNOWN,
     };
     let frames = Source::channel();
     let server = Server::start(
@@ -198,6 +199,7 @@ async fn wrong_token_pin_and_version_are_refused_with_the_reason() {
         window_mode: WindowMode::Off,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
         congestion: Congestion::default(),
+        effects: protocol::Effects::UNKNOWN,
     };
     let started = Server::start(
         "127.0.0.1:0".parse().unwrap(),
@@ -390,6 +392,7 @@ async fn fake_server(
             buffers: StreamBuffer::default_set(Codec::Raw).to_vec(),
             window_mode: WindowMode::Off,
             max_frame: SIZE,
+            effects: protocol::Effects::UNKNOWN,
         });
         send.write_all(&protocol::wire::encode(&welcome).unwrap())
             .await
@@ -466,6 +469,7 @@ async fn a_dump_replays_from_the_start_for_every_session() {
         window_mode: WindowMode::Off,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
         congestion: Congestion::default(),
+        effects: protocol::Effects::UNKNOWN,
     };
     let feed = Feed::PerSession {
         spec: SourceSpec::Dump {
@@ -705,6 +709,7 @@ fn server_in_runtime(
         window_mode: WindowMode::Off,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
         congestion: Congestion::default(),
+        effects: protocol::Effects::UNKNOWN,
     };
     let deadline = std::time::Instant::now() + Duration::from_secs(5);
     let server = loop {

@@ -39,6 +39,23 @@ impl Input {
     }
 }
 
+impl Input {
+    /// What a stream of it does: a scene's from its file, a dump's from its
+    /// manifest (unknown, every stage, where the manifest does not say).
+    pub fn effects(&self) -> anyhow::Result<framegen::Effects> {
+        Ok(match self {
+            Input::Scene(spec) => Scene::load(spec)
+                .with_context(|| format!("scene {spec}"))?
+                .stream_effects(),
+            Input::Dump(dir) => DumpReader::open(dir)
+                .with_context(|| format!("dump {}", dir.display()))?
+                .manifest()
+                .effects
+                .unwrap_or_default(),
+        })
+    }
+}
+
 /// One step of a sequence: the frame to feed and the ground truth.
 #[derive(Clone)]
 pub struct Step {

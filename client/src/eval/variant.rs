@@ -23,6 +23,11 @@ pub enum Axis {
     Epsilon,
     /// The warp's colour filter (sub-pixel resampling).
     Resample,
+    /// Shading correction (GFFE §4.4).
+    Shading,
+    /// The stages the stream's effects call for (issue 17): every stage
+    /// against the plan.
+    Plan,
     /// The adaptive rendering window (GFFE §4.3, DESIGN §4.5).
     Window,
     /// Generated frames per rendered frame.
@@ -41,6 +46,8 @@ impl Axis {
             Axis::Pyramid => "push-pull pyramid depth",
             Axis::Epsilon => "static threshold ε (gffe)",
             Axis::Resample => "colour filter (gffe, reproject, interp)",
+            Axis::Shading => "shading correction (gffe, GFFE §4.4)",
+            Axis::Plan => "stages planned from the stream's effects (gffe)",
             Axis::Window => "adaptive window",
             Axis::N => "generated frames per rendered frame n",
             Axis::Resolution => "resolution",
@@ -50,6 +57,13 @@ impl Axis {
 
 /// The label of the oracle-motion row.
 pub const ORACLE: &str = "gffe oracle-motion";
+
+/// The label of gffe without shading correction (the geometry-aware
+/// result GFFE eq. 3's focus region is defined from).
+pub const NO_SHADING: &str = "gffe no-shading";
+
+/// The label of gffe running every stage, whatever the stream's effects.
+pub const EVERY_STAGE: &str = "gffe every-stage";
 
 /// Which variants to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -79,6 +93,9 @@ pub struct Variant {
     /// the rendered frame with `settings`' filter and pyramid. Untimed
     /// (it is not realisable), so on no Pareto front.
     pub oracle: bool,
+    /// Runs every stage: the stream's effects are not applied
+    /// ([`for_stream`]).
+    pub every_stage: bool,
 }
 
 impl Variant {
@@ -90,6 +107,7 @@ impl Variant {
             window: WindowMode::Off,
             size,
             oracle: false,
+            every_stage: false,
         }
     }
 
@@ -114,6 +132,15 @@ pub fn window_name(mode: WindowMode) -> &'static str {
     }
 }
 
+/// Gives every variant but the every-stage one the stream's `effects`, so
+/// that it runs the stages its content calls for
+/// ([`framegen::pipeline::plan::Plan`]).
+pub fn for_stream(variants: &mut [Variant], effects: framegen::Effects) {
+    for v in variants.iter_mut().filter(|v| !v.every_stage) {
+        v.settings.effects = effects;
+    }
+}
+
 /// The variants of one scene at `size`; `windows` is false for dumps (their
 /// window is whatever they were rendered with).
 pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
@@ -131,6 +158,15 @@ pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
         ..Variant::new(Axis::Method, ORACLE.into(), at(Method::Gffe), size)
     };
     out.insert(gffe_at.map_or(out.len(), |i| i + 1), oracle);
+    let plain = Settings {
+        shading: false,
+        ..at(Method::Gffe)
+    };
+    out.push(Variant::new(Axis::Shading, NO_SHADING.into(), plain, size));
+    out.push(Variant {
+        every_stage: true,
+        ..Variant::new(Axis::Plan, EVERY_STAGE.into(), at(Method::Gffe), size)
+    });
     if kind == Sweep::Methods {
         return out;
     }
@@ -244,10 +280,38 @@ mod tests {
         for v in &all {
             v.settings.validate().unwrap();
         }
-        // The four methods and the oracle beside gffe.
-        let methods = sweep(Sweep::Methods, size, true);
+        // The four methods, the oracle beside gffe, gffe without shading
+        // correction, gffe with every stage.
+        let mut methods = sweep(Sweep::Methods, size, true);
         let labels: Vec<&str> = methods.iter().map(|v| v.label.as_str()).collect();
-        assert_eq!(labels, ["repeat", "reproject", "gffe", ORACLE, "interp"]);
+        assert_eq!(
+            labels,
+            [
+                "repeat",
+                "reproject",
+                "gffe",
+                ORACLE,
+                "interp",
+                NO_SHADING,
+                EVERY_STAGE
+            ]
+        );
+        assert!(
+            methods
+                .iter()
+                .all(|v| v.settings.shading == (v.label != NO_SHADING))
+        );
+        // The stream's effects reach all but the every-stage row.
+        for_stream(&mut methods, framegen::Effects::STATIC);
+        for v in &methods {
+            let expected = if v.every_stage {
+                framegen::Effects::UNKNOWN
+            } else {
+                framegen::Effects::STATIC
+            };
+            assert_eq!(v.settings.effects, expected, "{}", v.label);
+        }
+        assert_eq!(methods.iter().filter(|v| v.every_stage).count(), 1);
         assert_eq!(methods.iter().filter(|v| v.oracle).count(), 1);
         assert!(
             !sweep(Sweep::Full, size, false)

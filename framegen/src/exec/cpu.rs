@@ -14,7 +14,7 @@ use crate::passes::common::levels::Levels;
 use crate::passes::common::resample::{Resample, Source};
 use crate::passes::common::splat;
 use crate::passes::common::{crop, pushpull};
-use crate::passes::gffe::{background, bgfill, history, motion, warp};
+use crate::passes::gffe::{background, bgfill, history, motion, shading, warp};
 use crate::passes::interp::{reproject, resolve};
 use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapshot};
 
@@ -27,6 +27,10 @@ struct FrameState {
     k: u32,
     levels: Levels,
     background: Vec<background::Texel>,
+    /// Shading correction's `(r_t, aligned r_{t−1})` per pixel and flow
+    /// per block; empty without an estimate.
+    ratio: Vec<[f32; 2]>,
+    flow: Vec<[f32; 4]>,
 }
 
 /// A rendered frame being ingested (between `upload` and `ingested`).
@@ -66,6 +70,9 @@ pub struct CpuBackend {
     /// continuous target position), for the resampling filter; kept from
     /// frame to frame.
     landings: Vec<AtomicU64>,
+    /// The shading-corrected colour of the generated frame being made,
+    /// which its warp moves instead of the rendered colour.
+    shaded: Option<Vec<[f32; 4]>>,
 }
 
 fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
@@ -159,6 +166,8 @@ impl Executor for CpuBackend {
                 k: plan.k,
                 levels: plan.levels,
                 background: Vec::new(),
+                ratio: Vec::new(),
+                flow: Vec::new(),
             },
             prev,
             spare: self.previous.take(),
@@ -226,6 +235,41 @@ impl Executor for CpuBackend {
         Ok(())
     }
 
+    fn shading(&mut self, _plan: &IngestPlan) -> Result<(), FramegenError> {
+        let i = ingesting(&mut self.ingest)?;
+        // Only a frame whose motion reaches the previous one, at its size,
+        // has a change to measure.
+        let Some((_, p)) = i
+            .prev
+            .as_ref()
+            .filter(|(_, p)| i.follows && p.frame.depth.len() == i.state.frame.depth.len())
+        else {
+            return Ok(());
+        };
+        let (f, s) = (&i.state.frame, &i.state);
+        let size = (s.camera.width(), s.camera.height());
+        let (ratio, flow) = timed(&mut self.timings, Pass::Shading, || {
+            let cur = shading::Current {
+                color: &f.color,
+                depth: &f.depth,
+                motion: &f.motion,
+                track: &s.history.track,
+                size,
+            };
+            let prev = shading::Previous {
+                color: &p.frame.color,
+                depth: &p.frame.depth,
+                ratio: &p.ratio,
+            };
+            let ratio = shading::ratio(&cur, &prev);
+            let flow = shading::flow(&ratio, size);
+            (ratio, flow)
+        });
+        i.state.ratio = ratio;
+        i.state.flow = flow;
+        Ok(())
+    }
+
     fn ingested(&mut self) -> Result<u32, FramegenError> {
         let i = self
             .ingest
@@ -241,8 +285,9 @@ impl Executor for CpuBackend {
     fn begin(&mut self, _job: &Job) -> Result<(), FramegenError> {
         self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         self.timings
-            .retain(|p| matches!(p.pass, Pass::History | Pass::Background));
+            .retain(|p| matches!(p.pass, Pass::History | Pass::Background | Pass::Shading));
         self.out = None;
+        self.shaded = None;
         Ok(())
     }
 
@@ -262,9 +307,32 @@ impl Executor for CpuBackend {
         Ok(())
     }
 
+    fn shade(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        if cur.ratio.is_empty() {
+            // No estimate (first frame, gap): the rendered colour as it is.
+            return Ok(());
+        }
+        let f = &cur.frame;
+        self.shaded = Some(timed(&mut self.timings, Pass::Shade, || {
+            let e = shading::Estimate {
+                color: &f.color,
+                track: &cur.history.track,
+                ratio: &cur.ratio,
+                flow: &cur.flow,
+                size: (cur.camera.width(), cur.camera.height()),
+            };
+            shading::correct(&e, job.alpha)
+        }));
+        Ok(())
+    }
+
     fn motion(&mut self, job: &Job) -> Result<(), FramegenError> {
         self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         self.motion = Some(job.alpha);
+        // Fused into the warp, which times it: listed at zero so that the
+        // timings name every pass the plan runs.
+        timed(&mut self.timings, Pass::Motion, || ());
         Ok(())
     }
 
@@ -280,6 +348,7 @@ impl Executor for CpuBackend {
             .take()
             .ok_or(FramegenError::PassOrder("warp() before motion()"))?;
         let landings = &mut self.landings;
+        let shaded = self.shaded.take();
         let out = timed(&mut self.timings, Pass::Warp, || {
             let (w, h) = (job.target.width(), job.target.height());
             let (positions, track) = (&cur.history.positions, &cur.history.track);
@@ -301,7 +370,7 @@ impl Executor for CpuBackend {
             });
             let f = &cur.frame;
             let source = Source {
-                color: &f.color,
+                color: shaded.as_deref().unwrap_or(&f.color),
                 depth: &f.depth,
                 size: (cur.camera.width(), cur.camera.height()),
             };

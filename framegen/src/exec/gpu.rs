@@ -22,6 +22,7 @@ use crate::passes::gffe::background::{GpuBackground, Texel as BgTexel};
 use crate::passes::gffe::bgfill::GpuBgFill;
 use crate::passes::gffe::history::{GpuHistory, GpuHistoryBuffers};
 use crate::passes::gffe::motion::GpuMotion;
+use crate::passes::gffe::shading::{self, GpuCurrent, GpuPrevious, GpuShading};
 use crate::passes::gffe::warp::{GpuOutput, GpuSource, GpuWarp};
 use crate::passes::interp::reproject::GpuReproject;
 use crate::passes::interp::resolve::{GpuImage, GpuResolve};
@@ -40,6 +41,7 @@ struct Kernels {
     crop: GpuCrop,
     interp: GpuReproject,
     resolve: GpuResolve,
+    shading: GpuShading,
 }
 
 /// One ingested frame on the GPU.
@@ -55,11 +57,19 @@ struct FrameBuffers {
     positions: wgpu::Buffer,
     track: wgpu::Buffer,
     background: wgpu::Buffer,
+    /// Shading correction's `vec2` per pixel and `vec4` per block.
+    ratio: wgpu::Buffer,
+    flow: wgpu::Buffer,
+    /// Whether `ratio` and `flow` hold this frame's estimate.
+    has_ratio: bool,
 }
 
 impl FrameBuffers {
     fn new(ctx: &GpuContext, n: u32, k: u32, levels: Levels, camera: PassCamera) -> Self {
         let n64 = u64::from(n);
+        // Blocks of any w×h = n frame: ⌈w/8⌉·⌈h/8⌉ ≤ n/8 + 1 (the buffers
+        // are reused for any frame of n pixels).
+        let blocks = n64 / u64::from(shading::BLOCK) + 1;
         Self {
             camera,
             n,
@@ -74,6 +84,22 @@ impl FrameBuffers {
                 "background",
                 u64::from(levels.total()) * std::mem::size_of::<BgTexel>() as u64,
             ),
+            ratio: ctx.storage("shading ratio", n64 * 8),
+            flow: ctx.storage("shading flow", blocks * 16),
+            has_ratio: false,
+        }
+    }
+
+    /// The buffers shading correction reads and writes.
+    fn shading(&self) -> GpuCurrent<'_> {
+        GpuCurrent {
+            color: &self.color,
+            depth: &self.depth,
+            motion: &self.motion,
+            track: &self.track,
+            ratio: &self.ratio,
+            flow: &self.flow,
+            size: (self.camera.width(), self.camera.height()),
         }
     }
 }
@@ -91,6 +117,7 @@ struct Scratch {
     mask: Option<wgpu::Buffer>,
     pyramid: Option<wgpu::Buffer>,
     dynamic: Option<wgpu::Buffer>,
+    shaded: Option<wgpu::Buffer>,
     /// Where a generated frame is copied for the CPU to read.
     staging: Option<wgpu::Buffer>,
     /// Where an ingest's dynamic-pixel count is copied for the CPU to read.
@@ -222,6 +249,8 @@ struct Generation {
     next: wgpu::Buffer,
     pyramid: wgpu::Buffer,
     layout: Levels,
+    /// The shading-corrected colour the warp moves, once `shade` made it.
+    shaded: Option<wgpu::Buffer>,
 }
 
 impl FrameBuffers {
@@ -287,6 +316,7 @@ impl GpuBackend {
             crop: GpuCrop::new(c),
             interp: GpuReproject::new(c),
             resolve: GpuResolve::new(c),
+            shading: GpuShading::new(c),
         };
         Self {
             ctx,
@@ -477,6 +507,7 @@ impl Executor for GpuBackend {
             }
         };
         buffers.camera = plan.camera;
+        buffers.has_ratio = false;
         let queue = &ctx.queue;
         queue.write_buffer(&buffers.color, 0, bytemuck::cast_slice(&frame.color));
         queue.write_buffer(&buffers.depth, 0, bytemuck::cast_slice(&frame.depth));
@@ -557,6 +588,30 @@ impl Executor for GpuBackend {
         })
     }
 
+    fn shading(&mut self, _plan: &IngestPlan) -> Result<(), FramegenError> {
+        self.record_ingest(Pass::Shading, |ctx, k, i, enc| {
+            let b = &i.buffers;
+            // Only a frame whose motion reaches the previous one, at its
+            // size, has a change to measure; otherwise the planes clear.
+            let prev = i
+                .prev
+                .as_ref()
+                .filter(|(_, p)| i.follows && p.n == b.n)
+                .map(|(_, p)| GpuPrevious {
+                    color: &p.color,
+                    depth: &p.depth,
+                    ratio: &p.ratio,
+                    has_ratio: p.has_ratio,
+                });
+            k.shading.encode_estimate(ctx, enc, b.shading(), prev);
+        })?;
+        if let Some(i) = self.ingest.as_mut() {
+            let n = i.buffers.n;
+            i.buffers.has_ratio = i.follows && i.prev.as_ref().is_some_and(|(_, p)| p.n == n);
+        }
+        Ok(())
+    }
+
     fn ingested(&mut self) -> Result<u32, FramegenError> {
         let i = self
             .ingest
@@ -589,9 +644,12 @@ impl Executor for GpuBackend {
 
     fn begin(&mut self, job: &Job) -> Result<(), FramegenError> {
         let ctx = &*self.ctx;
-        self.rec
-            .timings
-            .retain(|p| matches!(p.pass, Pass::Upload | Pass::History | Pass::Background));
+        self.rec.timings.retain(|p| {
+            matches!(
+                p.pass,
+                Pass::Upload | Pass::History | Pass::Background | Pass::Shading
+            )
+        });
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         let (tw, th) = (job.target.width(), job.target.height());
         let tn = tw * th;
@@ -620,6 +678,7 @@ impl Executor for GpuBackend {
             .clone(),
             pyramid: ensure(ctx, pool, &mut s.pyramid, "pyramid", pyramid_bytes).clone(),
             layout,
+            shaded: None,
         });
         self.rec.encoder = None;
         Ok(())
@@ -640,6 +699,29 @@ impl Executor for GpuBackend {
             if still {
                 enc.clear_buffer(&p.g.motion, 0, Some(u64::from(p.g.tn) * 8));
             }
+        })
+    }
+
+    fn shade(&mut self, job: &Job) -> Result<(), FramegenError> {
+        let n = match &self.current {
+            // No estimate (first frame, gap): the rendered colour as it is.
+            Some(c) if !c.has_ratio => return Ok(()),
+            Some(c) => c.n,
+            None => return Err(FramegenError::NoFrame),
+        };
+        let ctx = &*self.ctx;
+        let (s, pool) = (&mut self.scratch, &self.rec.pool);
+        let shaded = ensure(ctx, pool, &mut s.shaded, "shaded color", u64::from(n) * 16).clone();
+        let g = self
+            .generation
+            .as_mut()
+            .ok_or(FramegenError::PassOrder("a pass ran before begin()"))?;
+        g.shaded = Some(shaded.clone());
+        let alpha = job.alpha;
+        self.record(Pass::Shade, |p, enc| {
+            p.kernels
+                .shading
+                .encode_correct(p.ctx, enc, p.cur.shading(), alpha, &shaded);
         })
     }
 
@@ -669,7 +751,7 @@ impl Executor for GpuBackend {
                 .encode_project(p.ctx, enc, &job.target, &g.next, c.n, &g.candidates);
             g.splat(p, enc, u64::from(c.n), u64::from(g.tn));
             let source = GpuSource {
-                color: &c.color,
+                color: g.shaded.as_ref().unwrap_or(&c.color),
                 depth: &c.depth,
                 next: &g.next,
                 size: (c.camera.width(), c.camera.height()),

@@ -6,6 +6,8 @@
 //! timings, and the history snapshot the parity tests compare. The generator
 //! and each executor depend on this module, never on each other (DESIGN §2).
 
+pub mod plan;
+
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -41,6 +43,11 @@ pub enum Pass {
     Reproject,
     /// GeoMotionGen resolve.
     Resolve,
+    /// Shading correction's estimate (GFFE §4.4: what changed and how it
+    /// moves), at ingest.
+    Shading,
+    /// Shading correction applied to the colour the warp moves.
+    Shade,
     /// (GPU) reading the generated frame back.
     Readback,
 }
@@ -59,6 +66,8 @@ impl Pass {
             Pass::Crop => "crop",
             Pass::Reproject => "reproject",
             Pass::Resolve => "resolve",
+            Pass::Shading => "shading",
+            Pass::Shade => "shade",
             Pass::Readback => "readback",
         }
     }
@@ -98,6 +107,9 @@ pub struct IngestPlan {
     pub levels: Levels,
     /// Case-2 depth margin.
     pub tolerance: f32,
+    /// Whether shading correction's estimate runs (gffe with
+    /// `Settings::shading`; it needs the history's static test).
+    pub shading: bool,
 }
 
 impl IngestPlan {
@@ -134,6 +146,8 @@ pub struct Job {
     pub crop: Crop,
     /// How the warp takes a winner's colour.
     pub resample: Resample,
+    /// Whether the warp moves the shading-corrected colour (GFFE §4.4).
+    pub shading: bool,
 }
 
 /// The generation passes, one method per pass, as an executor runs them on
@@ -149,6 +163,9 @@ pub trait Executor {
     fn history(&mut self, plan: &IngestPlan) -> Result<(), FramegenError>;
     /// GFFE §4.2: the background layers.
     fn background(&mut self, plan: &IngestPlan) -> Result<(), FramegenError>;
+    /// GFFE §4.4, estimate: how the shading changed from the previous
+    /// frame and how that change moves (none after a gap or restart).
+    fn shading(&mut self, plan: &IngestPlan) -> Result<(), FramegenError>;
     /// Ends the ingest: the frame becomes the one generation starts from.
     /// Returns the number of pixels that failed the static test (0 without
     /// a previous frame or tracking).
@@ -162,6 +179,9 @@ pub trait Executor {
     /// The rendered frame's region `crop`, resampled into the output;
     /// `still` zeroes the motion (repeat shows a still frame).
     fn crop(&mut self, crop: &Crop, still: bool) -> Result<(), FramegenError>;
+    /// GFFE §4.4, correction: the colour the following warp moves, with
+    /// the estimated shading change continued to α.
+    fn shade(&mut self, job: &Job) -> Result<(), FramegenError>;
     /// GFFE eq. 1: every pixel's position at α.
     fn motion(&mut self, job: &Job) -> Result<(), FramegenError>;
     /// Forward warp of those positions into the output (project, splat,
@@ -192,6 +212,9 @@ pub fn ingest<E: Executor + ?Sized>(
     if plan.k > 0 {
         e.history(plan)?;
         e.background(plan)?;
+        if plan.shading {
+            e.shading(plan)?;
+        }
     }
     e.ingested()
 }
@@ -219,6 +242,9 @@ pub fn generate<E: Executor + ?Sized>(e: &mut E, job: &Job) -> Result<Output, Fr
             e.resolve(job)?;
         }
         Method::Reproject | Method::Gffe => {
+            if job.shading {
+                e.shade(job)?;
+            }
             e.motion(job)?;
             e.warp(job)?;
             if job.bg_source.count > 0 && job.bg_target.count == job.bg_source.count {

@@ -34,7 +34,7 @@ pub use exr_io::{MAX_EXR_CHANNELS, PANIC_DETAIL, channel_names, read_exr, write_
 pub(crate) use exr_io::{PlaneOut, mask_bytes, read_planes, rgb_pixel, write_planes};
 
 use crate::frame::{Frame, FrameMeta, FrameSize};
-use crate::{CONVENTIONS_VERSION, Limits, ValidationError};
+use crate::{CONVENTIONS_VERSION, Effects, Limits, ValidationError};
 
 /// The `format` string every manifest carries.
 pub const FORMAT_NAME: &str = "framegen-stream-dump";
@@ -66,6 +66,10 @@ pub struct Manifest {
     pub frame_count: u64,
     /// Free-form description: scene, renderer, importer, command line.
     pub source: String,
+    /// What the recorded content does (the client plans its stages from
+    /// it); absent in dumps that do not know, which then run every stage.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub effects: Option<Effects>,
 }
 
 impl Manifest {
@@ -80,6 +84,15 @@ impl Manifest {
             height: size.height,
             frame_count: 0,
             source: source.into(),
+            effects: None,
+        }
+    }
+
+    /// The same manifest, recording `effects`.
+    pub fn with_effects(self, effects: Effects) -> Self {
+        Self {
+            effects: Some(effects),
+            ..self
         }
     }
 

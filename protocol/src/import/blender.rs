@@ -305,7 +305,13 @@ impl BlenderDump {
         })
     }
 
-    /// For manifests and logs.
+    /// The pass indices of the animated objects, where the sidecar lists
+    /// them.
+    pub fn animated(&self) -> Option<&[u32]> {
+        self.sidecar.animated_pass_indices.as_deref()
+    }
+
+    /// What the dump is, for manifests and logs.
     pub fn describe(&self) -> String {
         format!(
             "Blender {} ({}) render in {}",

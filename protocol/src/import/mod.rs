@@ -30,9 +30,9 @@ use std::path::{Path, PathBuf};
 use glam::{DMat3, DQuat, DVec3};
 use serde::Deserialize;
 
-use crate::Limits;
 use crate::dump::{DumpError, DumpReader, DumpWriter, Manifest, read_capped};
 use crate::frame::{Frame, FrameMeta, FrameSize};
+use crate::{Effects, Limits};
 
 pub use reprojection::{Hypothesis, ReprojectionCheck, ReprojectionReport};
 pub(crate) use timeline::Entry;
@@ -263,6 +263,21 @@ impl AnyDump {
         }
     }
 
+    /// What the content does, as far as the source says: a native dump's
+    /// manifest, a Blender sidecar's list of animated objects (an empty list:
+    /// no dynamic objects). Shading is never known from a render's passes,
+    /// so it stays "may move".
+    pub fn effects(&self) -> Effects {
+        match self {
+            AnyDump::Native(d) => d.manifest().effects.unwrap_or_default(),
+            AnyDump::Blender(d) => Effects {
+                dynamic_objects: d.animated().is_none_or(|list| !list.is_empty()),
+                ..Effects::UNKNOWN
+            },
+            AnyDump::Unreal(_) => Effects::UNKNOWN,
+        }
+    }
+
     /// Metadata of frame `position` (cheap: no pixels are read).
     pub fn read_meta(&self, position: u64) -> Result<FrameMeta, ImportError> {
         Ok(match self {
@@ -428,7 +443,8 @@ pub fn import(
         source.fps(),
         source.size(),
         format!("imported from {}", source.describe()),
-    );
+    )
+    .with_effects(source.effects());
     let mut writer = DumpWriter::create(out, manifest)?;
     let mut report = ImportReport {
         format: source.format(),

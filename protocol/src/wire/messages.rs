@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::Pose;
 use crate::frame::{BufferDesc, BufferKind, FrameMeta, FrameSize, PixelFormat};
-use crate::{Codec, Limits, ValidationError};
+use crate::{Codec, Effects, Limits, ValidationError};
 
 /// Longest client name, server name, token or free-text reason, in bytes.
 pub const MAX_TEXT: usize = 1024;
@@ -79,6 +79,9 @@ pub struct Welcome {
     /// The largest frame the stream sends (the widened window makes frames
     /// larger than `size`): the client tightens its limits to it.
     pub max_frame: FrameSize,
+    /// What the stream's content does: the client runs only the generation
+    /// stages it calls for.
+    pub effects: Effects,
 }
 
 /// Why a server refused a client.

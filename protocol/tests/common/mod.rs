@@ -179,10 +179,11 @@ pub fn message() -> impl Strategy<Value = Message> {
             1.0f64..240.0,
             stream_buffers(),
             window_mode(),
-            (0u32..=64, 0u32..=64)
+            (0u32..=64, 0u32..=64),
+            (any::<bool>(), any::<bool>())
         )
             .prop_map(
-                |(session_id, server_name, size, fps, buffers, window_mode, grow)| {
+                |(session_id, server_name, size, fps, buffers, window_mode, grow, effects)| {
                     // The largest frame: the size, widened within the limits.
                     let max_frame = FrameSize::new(
                         (size.width + grow.0).min(8192),
@@ -196,6 +197,10 @@ pub fn message() -> impl Strategy<Value = Message> {
                         buffers,
                         window_mode,
                         max_frame,
+                        effects: protocol::Effects {
+                            dynamic_objects: effects.0,
+                            moving_shading: effects.1,
+                        },
                     })
                 }
             ),

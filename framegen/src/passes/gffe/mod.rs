@@ -12,12 +12,15 @@
 //! | 6 background projection into holes | [`bgfill`] | §4.2 |
 //! | 7 push-pull fill of what remains | [`crate::passes::common::pushpull`] | DESIGN §4 step 7 |
 //! | 8 adaptive window crop | [`crate::passes::common::crop`] | §4.3, appendix C |
+//! | 9 shading correction (hand-built) | [`shading`] | §4.4, eq. 3–4 |
 //!
-//! Shading correction (§4.4) is a later stage; it plugs in after step 7 on
-//! the generated color, depth and mask.
+//! Shading correction estimates at ingest (after step 1) how the shading
+//! moved from `t−1` to `t`, and corrects the colour the warp (step 4)
+//! moves; see [`shading`] for why it runs before the warp.
 
 pub mod background;
 pub mod bgfill;
 pub mod history;
 pub mod motion;
+pub mod shading;
 pub mod warp;

@@ -1,0 +1,700 @@
+//! Shading correction (GFFE §4.4, DESIGN §4 step 8), hand-built: the
+//! shading a geometry-aware warp leaves behind, moved on.
+//!
+//! Warping moves surfaces, not the light on them: a shadow or highlight
+//! that slides over a static surface stays where frame `t` had it. GFFE
+//! closes this with a small network (SCN) fed the geometry-aware result,
+//! its depth, frame `t−1` warped to `t+α` and a mask, and blends its output
+//! in by a predicted focus mask, `I = I_gae·(1−M) + I'·M` (eq. 4). This
+//! stage keeps that contract with an estimator built by hand instead of a
+//! learned one:
+//!
+//! 1. **What changed** (`shading_ratio`, at ingest). Frame `t−1` aligned to
+//!    frame `t` by frame `t`'s own motion (the geometry the warp uses, so
+//!    what differs is shading, not geometry): per static pixel the log
+//!    ratio `r_t = ln((L_t + ε) / (L_{t−1} + ε))` of luminances, where
+//!    `L_{t−1}` is the nearest end of the range the aligned position's
+//!    bilinear footprint spans in frame `t−1` (its taps of weight ≥
+//!    [`FOOTPRINT`] on the pixel's own surface, depths within
+//!    `SAME_SURFACE_RATIO`), and `r = 0` inside it: what a sub-pixel shift
+//!    of the texture could show is not shading (the spirit of eq. 3's
+//!    neighbourhood minimum, at the resampling's own scale); a pixel on a
+//!    centre compares with that one pixel exactly. Dynamic (and
+//!    disoccluded: the static test fails there) pixels, points without a
+//!    surface, positions outside frame `t−1` and footprints off the surface
+//!    have `r = 0`. The previous frame's `r_{t−1}`, aligned the
+//!    same way, is kept beside it.
+//! 2. **How it moves** (`shading_flow`, at ingest). Per block of
+//!    [`BLOCK`]² pixels whose change is large enough ([`MIN_ENERGY`]), the
+//!    displacement `f` (within ±[`SEARCH`] px: every even one, then the
+//!    pixel around the best) that best maps the previous change onto this
+//!    one, `r_t(x) ≈ r_{t−1}(x − f)` (least absolute difference; ties to
+//!    the shorter `f`): a moving shadow edge leaves a
+//!    band of change that moves on by `f` every interval. A block whose
+//!    change that does not explain ([`COHERENCE`]) is left alone: noise
+//!    does not repeat itself, moving shading does (so the estimate needs
+//!    two intervals of history).
+//! 3. **Where it goes** (`shading_correct`, per generated frame). The
+//!    change continues along `f`: over `α` intervals the pixel `x` gets
+//!    `r̂ = Σ_k w_k · r_t(x − k·f)`, `w_k = min(1, α − (k−1))` (for α ≤ 1
+//!    `α · r_t(x − f)`: exact at α = 1 for an edge moving at constant speed,
+//!    the edge's mean over the interval in between). `f` comes from the
+//!    block around `x` with the most change (its 3×3 blocks), so pixels
+//!    the band is about to reach take its motion. A uniform change (a
+//!    light dimming) has `f = 0` and continues in place.
+//! 4. **Focus mask** `M = smoothstep(FOCUS_LOW, FOCUS_HIGH, |r̂|)`, zero on
+//!    dynamic pixels: the correction `I' = I·e^{r̂}` is blended in only
+//!    where a clear change is predicted, eq. 4; elsewhere the colour is the
+//!    geometry-aware one bit for bit.
+//!
+//! **Departures from the seed.** The estimate runs on frame `t`'s grid
+//! before the warp, and the corrected colour is what the warp then moves:
+//! frame `t−1` aligned to `t` by `t`'s motion and then warped with `t`'s
+//! geometry *is* frame `t−1` warped to `t+α` (GFFE's input), and working
+//! before the warp resamples each image once. The estimate (steps 1–2)
+//! runs once per rendered frame, shared by its generated frames; only
+//! step 3–4 runs per generated frame. No network: no training data, no
+//! weights; the estimator is the seed's "non-geometric motion" made
+//! explicit as a moving band of luminance change. Colour is scaled by the
+//! luminance ratio (hue kept).
+
+use glam::Vec2;
+
+use crate::gpu::{Binding, GpuContext, Kernel, Rec};
+use crate::passes::common::resample::same_surface;
+use crate::passes::gffe::history::is_dynamic;
+
+/// Added to luminances before their ratio, so black against black is no
+/// change and the ratio stays finite.
+pub const LUMA_FLOOR: f32 = 1e-3;
+/// Bilinear weight below which a tap of the aligned footprint does not
+/// count (a position on a pixel centre has one tap).
+pub const FOOTPRINT: f32 = 1.0 / 16.0;
+/// Largest |log ratio| kept (e⁴ ≈ 55×).
+pub const MAX_LOG_RATIO: f32 = 4.0;
+/// Side of the blocks the shading flow is estimated for, pixels.
+pub const BLOCK: u32 = 8;
+/// Search radius of the shading flow, pixels per render interval.
+pub const SEARCH: i32 = 8;
+/// Σ|r| over a block below which it has no change worth tracking (e.g.
+/// eight pixels whose luminance changed by a third).
+pub const MIN_ENERGY: f32 = 2.0;
+/// A block's change is tracked only when the previous change, moved by
+/// the best displacement, explains it to within this share of its
+/// magnitude (Σ|r_t − r_{t−1}(x − f)| ≤ this · Σ|r_t|).
+pub const COHERENCE: f32 = 0.5;
+/// The focus mask is 0 below this |predicted log change|...
+pub const FOCUS_LOW: f32 = 0.05;
+/// ...and 1 above this one.
+pub const FOCUS_HIGH: f32 = 0.2;
+/// Most render intervals a change is continued over (α beyond it is
+/// clamped: a shadow is not extrapolated further than the warp's own
+/// trajectories are trusted).
+pub const MAX_STEPS: f32 = 4.0;
+
+/// Log ratios are kept in steps of this (0.4 % of luminance): the flow's
+/// sums of them are then exact in `f32`, the same on every executor
+/// whatever order or `ln` it has.
+pub const QUANTUM: f32 = 1.0 / 256.0;
+
+/// `v` rounded to the nearest [`QUANTUM`] (halves up, as WGSL's `floor`
+/// gives it).
+#[inline]
+pub fn quantize(v: f32) -> f32 {
+    (v / QUANTUM + 0.5).floor() * QUANTUM
+}
+
+/// Rec. 709 luminance of linear RGB, negatives as 0.
+#[inline]
+pub fn luminance(c: [f32; 4]) -> f32 {
+    (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]).max(0.0)
+}
+
+/// Blocks of a `w`×`h` frame: columns, rows.
+pub fn blocks(w: u32, h: u32) -> (u32, u32) {
+    (w.div_ceil(BLOCK), h.div_ceil(BLOCK))
+}
+
+/// Frame `t` as the estimate reads it.
+#[derive(Clone, Copy, Debug)]
+pub struct Current<'a> {
+    /// Linear RGB.
+    pub color: &'a [[f32; 4]],
+    /// Sanitised depth (0 = no surface).
+    pub depth: &'a [f32],
+    /// Motion to frame `t−1`, pixels.
+    pub motion: &'a [[f32; 2]],
+    /// History track words (`is_dynamic`).
+    pub track: &'a [u32],
+    /// Width, height.
+    pub size: (u32, u32),
+}
+
+/// Frame `t−1` as the estimate reads it (same size).
+#[derive(Clone, Copy, Debug)]
+pub struct Previous<'a> {
+    /// Linear RGB.
+    pub color: &'a [[f32; 4]],
+    /// Sanitised depth.
+    pub depth: &'a [f32],
+    /// Its own `(r, aligned r)` per pixel, or empty (no estimate then).
+    pub ratio: &'a [[f32; 2]],
+}
+
+/// Step 1 for pixel `x`: `(r_t, r_{t−1} aligned)`.
+pub fn ratio_at(x: usize, cur: &Current<'_>, prev: &Previous<'_>) -> [f32; 2] {
+    let (w, h) = cur.size;
+    let d = cur.depth[x];
+    if is_dynamic(cur.track[x]) || d.is_nan() || d <= 0.0 {
+        return [0.0; 2];
+    }
+    let m = cur.motion[x];
+    let p = Vec2::new(
+        (x as u32 % w) as f32 + 0.5 + m[0],
+        (x as u32 / w) as f32 + 0.5 + m[1],
+    );
+    // NaN-safe: a position outside (or not a number) has no aligned pixel.
+    if !(p.x >= 0.0 && p.x < w as f32 && p.y >= 0.0 && p.y < h as f32) {
+        return [0.0; 2];
+    }
+    let (cx, cy) = (p.x as i32, p.y as i32);
+    let lt = luminance(cur.color[x]) + LUMA_FLOOR;
+    // The bilinear footprint of the aligned position: what a sub-pixel
+    // shift of the surface's texture could show there.
+    let (bx, by) = ((p.x - 0.5).floor(), (p.y - 0.5).floor());
+    let (tx, ty) = (p.x - 0.5 - bx, p.y - 0.5 - by);
+    let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
+    for (dx, dy, weight) in [
+        (0, 0, (1.0 - tx) * (1.0 - ty)),
+        (1, 0, tx * (1.0 - ty)),
+        (0, 1, (1.0 - tx) * ty),
+        (1, 1, tx * ty),
+    ] {
+        let sx = (bx as i32 + dx).clamp(0, w as i32 - 1) as usize;
+        let sy = (by as i32 + dy).clamp(0, h as i32 - 1) as usize;
+        let s = sy * w as usize + sx;
+        // Only taps of the pixel's own surface (not across a silhouette).
+        if weight < FOOTPRINT || !same_surface(prev.depth[s], d) {
+            continue;
+        }
+        let l = luminance(prev.color[s]) + LUMA_FLOOR;
+        lo = lo.min(l);
+        hi = hi.max(l);
+    }
+    // No tap on the surface: nothing to compare with.
+    let best = if lo > hi {
+        0.0
+    } else if lt < lo {
+        (lt / lo).ln()
+    } else if lt > hi {
+        (lt / hi).ln()
+    } else {
+        0.0
+    };
+    let aligned = prev
+        .ratio
+        .get(cy as usize * w as usize + cx as usize)
+        .map_or(0.0, |r| r[0]);
+    [quantize(best.clamp(-MAX_LOG_RATIO, MAX_LOG_RATIO)), aligned]
+}
+
+/// Step 1 for every pixel, on all cores.
+pub fn ratio(cur: &Current<'_>, prev: &Previous<'_>) -> Vec<[f32; 2]> {
+    use rayon::prelude::*;
+    (0..cur.track.len())
+        .into_par_iter()
+        .map(|x| ratio_at(x, cur, prev))
+        .collect()
+}
+
+/// Step 2 for block `b`: `[f.x, f.y, energy, 0]` (energy 0: nothing to
+/// track).
+pub fn flow_block(b: usize, ratio: &[[f32; 2]], size: (u32, u32)) -> [f32; 4] {
+    let (w, h) = size;
+    let (bw, _) = blocks(w, h);
+    let (x0, y0) = ((b as u32 % bw) * BLOCK, (b as u32 / bw) * BLOCK);
+    let (x1, y1) = ((x0 + BLOCK).min(w), (y0 + BLOCK).min(h));
+    let mut energy = 0.0f32;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            energy += ratio[(y * w + x) as usize][0].abs();
+        }
+    }
+    if energy.is_nan() || energy < MIN_ENERGY {
+        return [0.0; 4];
+    }
+    let cost = |dx: i32, dy: i32| {
+        let mut cost = 0.0f32;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let (sx, sy) = (x as i32 - dx, y as i32 - dy);
+                let before = if sx >= 0 && sx < w as i32 && sy >= 0 && sy < h as i32 {
+                    ratio[(sy as u32 * w + sx as u32) as usize][1]
+                } else {
+                    0.0
+                };
+                cost += (ratio[(y * w + x) as usize][0] - before).abs();
+            }
+        }
+        cost
+    };
+    // (cost, |f|², f): the least cost, then the shortest displacement;
+    // over every even displacement, then the pixel around the best.
+    let mut best = (f32::INFINITY, i32::MAX, 0i32, 0i32);
+    let consider = |best: &mut (f32, i32, i32, i32), dx: i32, dy: i32| {
+        let (c, len) = (cost(dx, dy), dx * dx + dy * dy);
+        if c < best.0 || (c == best.0 && len < best.1) {
+            *best = (c, len, dx, dy);
+        }
+    };
+    for dy in (-SEARCH..=SEARCH).step_by(2) {
+        for dx in (-SEARCH..=SEARCH).step_by(2) {
+            consider(&mut best, dx, dy);
+        }
+    }
+    let (cx, cy) = (best.2, best.3);
+    for dy in -1..=1 {
+        for dx in -1..=1 {
+            if dx != 0 || dy != 0 {
+                consider(&mut best, cx + dx, cy + dy);
+            }
+        }
+    }
+    // A change the previous one does not explain, moved, is no shading
+    // moving on (resampling noise, a first interval): left alone.
+    if best.0.is_nan() || best.0 > COHERENCE * energy {
+        return [0.0; 4];
+    }
+    [best.2 as f32, best.3 as f32, energy, 0.0]
+}
+
+/// Step 2 for every block, on all cores.
+pub fn flow(ratio: &[[f32; 2]], size: (u32, u32)) -> Vec<[f32; 4]> {
+    use rayon::prelude::*;
+    let (bw, bh) = blocks(size.0, size.1);
+    (0..(bw * bh) as usize)
+        .into_par_iter()
+        .map(|b| flow_block(b, ratio, size))
+        .collect()
+}
+
+/// The estimate of one rendered frame, as the correction reads it.
+#[derive(Clone, Copy, Debug)]
+pub struct Estimate<'a> {
+    /// Linear RGB of frame `t`.
+    pub color: &'a [[f32; 4]],
+    /// Track words.
+    pub track: &'a [u32],
+    /// `(r_t, aligned r_{t−1})` per pixel.
+    pub ratio: &'a [[f32; 2]],
+    /// Per block `[f.x, f.y, energy, 0]`.
+    pub flow: &'a [[f32; 4]],
+    /// Width, height.
+    pub size: (u32, u32),
+}
+
+/// `smoothstep(lo, hi, v)`, as WGSL defines it.
+#[inline]
+fn smoothstep(lo: f32, hi: f32, v: f32) -> f32 {
+    let t = ((v - lo) / (hi - lo)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Steps 3–4 for pixel `x` at `alpha`: its corrected colour.
+pub fn correct_at(x: usize, e: &Estimate<'_>, alpha: f32) -> [f32; 4] {
+    let c = e.color[x];
+    if is_dynamic(e.track[x]) {
+        return c;
+    }
+    let (w, h) = e.size;
+    let (bw, bh) = blocks(w, h);
+    let (px, py) = (x as u32 % w, x as u32 / w);
+    let (bx, by) = ((px / BLOCK) as i32, (py / BLOCK) as i32);
+    // A block with change of its own moves it by its own motion; one
+    // without takes the motion of the neighbour (3×3) with the most change,
+    // so the pixels a band is about to reach move with it.
+    let mut lender = e.flow[(by as u32 * bw + bx as u32) as usize];
+    if lender[2] <= 0.0 {
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let (nx, ny) = (bx + dx, by + dy);
+                if nx < 0 || ny < 0 || nx >= bw as i32 || ny >= bh as i32 {
+                    continue;
+                }
+                let f = e.flow[(ny as u32 * bw + nx as u32) as usize];
+                if f[2] > lender[2] {
+                    lender = f;
+                }
+            }
+        }
+    }
+    if lender[2] <= 0.0 {
+        return c;
+    }
+    let mut predicted = 0.0f32;
+    let mut left = alpha.clamp(0.0, MAX_STEPS);
+    let mut k = 1.0f32;
+    while left > 0.0 {
+        let weight = left.min(1.0);
+        let sx = (px as f32 + 0.5 - k * lender[0]).floor();
+        let sy = (py as f32 + 0.5 - k * lender[1]).floor();
+        if sx >= 0.0 && sx < w as f32 && sy >= 0.0 && sy < h as f32 {
+            predicted += weight * e.ratio[(sy as u32 * w + sx as u32) as usize][0];
+        }
+        left -= 1.0;
+        k += 1.0;
+    }
+    let m = smoothstep(FOCUS_LOW, FOCUS_HIGH, predicted.abs());
+    if m <= 0.0 {
+        return c;
+    }
+    let gain = predicted.clamp(-MAX_LOG_RATIO, MAX_LOG_RATIO).exp();
+    let blend = |v: f32| v + m * (v * gain - v);
+    [blend(c[0]), blend(c[1]), blend(c[2]), c[3]]
+}
+
+/// Steps 3–4 for every pixel, on all cores.
+pub fn correct(e: &Estimate<'_>, alpha: f32) -> Vec<[f32; 4]> {
+    use rayon::prelude::*;
+    (0..e.track.len())
+        .into_par_iter()
+        .map(|x| correct_at(x, e, alpha))
+        .collect()
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    /// width, height, blocks per row, blocks per column
+    size: [u32; 4],
+    /// whether frame t−1 has a ratio plane, 0, 0, 0
+    flags: [u32; 4],
+    /// alpha, 0, 0, 0
+    alpha: [f32; 4],
+}
+
+/// The GPU passes (`shading.wgsl`).
+#[derive(Debug)]
+pub struct GpuShading {
+    ratio: Kernel,
+    flow: Kernel,
+    correct: Kernel,
+}
+
+/// Frame `t`'s buffers as the GPU estimate reads them.
+#[derive(Debug, Clone, Copy)]
+pub struct GpuCurrent<'a> {
+    /// `vec4<f32>` colour.
+    pub color: &'a wgpu::Buffer,
+    /// `f32` depth.
+    pub depth: &'a wgpu::Buffer,
+    /// `vec2<f32>` motion.
+    pub motion: &'a wgpu::Buffer,
+    /// `u32` track words.
+    pub track: &'a wgpu::Buffer,
+    /// `vec2<f32>` ratios (written by the estimate).
+    pub ratio: &'a wgpu::Buffer,
+    /// `vec4<f32>` per block (written by the estimate).
+    pub flow: &'a wgpu::Buffer,
+    /// Width, height.
+    pub size: (u32, u32),
+}
+
+/// Frame `t−1`'s buffers as the GPU estimate reads them.
+#[derive(Debug, Clone, Copy)]
+pub struct GpuPrevious<'a> {
+    /// `vec4<f32>` colour.
+    pub color: &'a wgpu::Buffer,
+    /// `f32` depth.
+    pub depth: &'a wgpu::Buffer,
+    /// `vec2<f32>` ratios...
+    pub ratio: &'a wgpu::Buffer,
+    /// ...holding an estimate, or not (then unread).
+    pub has_ratio: bool,
+}
+
+impl GpuShading {
+    /// Compiles the kernels.
+    pub fn new(ctx: &GpuContext) -> Self {
+        use Binding::*;
+        let src = include_str!("shading.wgsl");
+        // params, color, depth, motion, track, prev color, prev ratio,
+        // ratio, flow, out, prev depth
+        let k = |entry, b: &[Binding]| Kernel::new(ctx, src, entry, b);
+        Self {
+            ratio: k(
+                "shading_ratio",
+                &[
+                    Uniform, Read, Read, Read, Read, Read, Read, ReadWrite, Skip, Skip, Read,
+                ],
+            ),
+            // The ratio and flow planes are written by one entry point and
+            // read by the next; the shader declares them read-write.
+            flow: k(
+                "shading_flow",
+                &[
+                    Uniform, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite, ReadWrite, Skip, Skip,
+                ],
+            ),
+            correct: k(
+                "shading_correct",
+                &[
+                    Uniform, Read, Skip, Skip, Read, Skip, Skip, ReadWrite, ReadWrite, ReadWrite,
+                    Skip,
+                ],
+            ),
+        }
+    }
+
+    fn params(ctx: &Rec<'_>, size: (u32, u32), has_prev: bool, alpha: f32) -> wgpu::Buffer {
+        let (bw, bh) = blocks(size.0, size.1);
+        ctx.uniform(bytemuck::bytes_of(&Params {
+            size: [size.0, size.1, bw, bh],
+            flags: [u32::from(has_prev), 0, 0, 0],
+            alpha: [alpha, 0.0, 0.0, 0.0],
+        }))
+    }
+
+    /// Records steps 1–2 for frame `cur` against `prev`. Without a
+    /// previous frame the ratio and flow are cleared (no correction).
+    pub fn encode_estimate(
+        &self,
+        ctx: &Rec<'_>,
+        encoder: &mut wgpu::CommandEncoder,
+        cur: GpuCurrent<'_>,
+        prev: Option<GpuPrevious<'_>>,
+    ) {
+        let Some(prev) = prev else {
+            encoder.clear_buffer(cur.ratio, 0, None);
+            encoder.clear_buffer(cur.flow, 0, None);
+            return;
+        };
+        let params = Self::params(ctx, cur.size, prev.has_ratio, 0.0);
+        let n = u64::from(cur.size.0) * u64::from(cur.size.1);
+        self.ratio.dispatch(
+            ctx,
+            encoder,
+            &[
+                &params, cur.color, cur.depth, cur.motion, cur.track, prev.color, prev.ratio,
+                cur.ratio, prev.depth,
+            ],
+            n,
+        );
+        let (bw, bh) = blocks(cur.size.0, cur.size.1);
+        self.flow.dispatch(
+            ctx,
+            encoder,
+            &[&params, cur.ratio, cur.flow],
+            u64::from(bw) * u64::from(bh),
+        );
+    }
+
+    /// Records steps 3–4 at `alpha` into `out` (`vec4<f32>` per pixel).
+    pub fn encode_correct(
+        &self,
+        ctx: &Rec<'_>,
+        encoder: &mut wgpu::CommandEncoder,
+        cur: GpuCurrent<'_>,
+        alpha: f32,
+        out: &wgpu::Buffer,
+    ) {
+        let params = Self::params(ctx, cur.size, false, alpha);
+        let n = u64::from(cur.size.0) * u64::from(cur.size.1);
+        self.correct.dispatch(
+            ctx,
+            encoder,
+            &[&params, cur.color, cur.track, cur.ratio, cur.flow, out],
+            n,
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const W: u32 = 48;
+    const H: u32 = 16;
+
+    /// A lit grey surface with a shadow over `x < edge` (luminance 1 and
+    /// 0.1), plus a fine texture that does not move.
+    fn shadowed(edge: f32) -> Vec<[f32; 4]> {
+        (0..W * H)
+            .map(|i| {
+                let x = i % W;
+                let texture = if x % 2 == 0 { 1.0 } else { 0.9 };
+                let v = if (x as f32) < edge { 0.1 } else { 1.0 } * texture;
+                [v, v, v, 1.0]
+            })
+            .collect()
+    }
+
+    fn current<'a>(color: &'a [[f32; 4]], track: &'a [u32]) -> Current<'a> {
+        Current {
+            color,
+            depth: &[1.0; (W * H) as usize],
+            motion: &[[0.0; 2]; (W * H) as usize],
+            track,
+            size: (W, H),
+        }
+    }
+
+    #[test]
+    fn a_moving_shadow_edge_is_continued() {
+        // The shadow's edge moves right by 3 px per interval: 12 → 15 → 18.
+        let track = vec![0u32; (W * H) as usize];
+        let (c0, c1, c2) = (shadowed(12.0), shadowed(15.0), shadowed(18.0));
+        let depth = vec![1.0f32; (W * H) as usize];
+        let none = Previous {
+            color: &c0,
+            depth: &depth,
+            ratio: &[],
+        };
+        let r1 = ratio(&current(&c1, &track), &none);
+        let r2 = ratio(
+            &current(&c2, &track),
+            &Previous {
+                color: &c1,
+                depth: &depth,
+                ratio: &r1,
+            },
+        );
+        // The new band (columns 15–17) changed by the shadow's ratio; the
+        // old shadow and the lit side did not, texture and all (no motion:
+        // each pixel compares with itself).
+        let at = |r: &[[f32; 2]], x: u32| r[(4 * W + x) as usize];
+        assert!(at(&r2, 16)[0] < -2.0, "{:?}", at(&r2, 16));
+        for (i, r) in r2.iter().enumerate() {
+            let changed = matches!(i as u32 % W, 15..=17);
+            assert_eq!(r[0] != 0.0, changed, "pixel {i}: {r:?}");
+        }
+        let f = flow(&r2, (W, H));
+        let moving: Vec<_> = f.iter().filter(|b| b[2] > 0.0).collect();
+        assert!(!moving.is_empty());
+        for b in moving {
+            assert_eq!((b[0], b[1]), (3.0, 0.0), "{b:?}");
+        }
+        // One interval on, the band reaches column 19 (18..21 becomes
+        // shadow): corrected to the truth's shadow there, the lit side
+        // beyond and the old shadow left alone.
+        let e = Estimate {
+            color: &c2,
+            track: &track,
+            ratio: &r2,
+            flow: &f,
+            size: (W, H),
+        };
+        let out = correct(&e, 1.0);
+        let truth = shadowed(21.0);
+        let px = |img: &[[f32; 4]], x: u32| img[(4 * W + x) as usize][0];
+        assert!(
+            (px(&out, 19) - px(&truth, 19)).abs() < 0.02,
+            "{}",
+            px(&out, 19)
+        );
+        assert_eq!(px(&out, 24), px(&c2, 24));
+        assert_eq!(px(&out, 5), px(&c2, 5));
+        // Half an interval: half the change, in log space.
+        let half = correct(&e, 0.5);
+        let expect = px(&c2, 19) * (0.5 * at(&r2, 16)[0]).exp();
+        assert!((px(&half, 19) - expect).abs() < 1e-5, "{}", px(&half, 19));
+        // Nothing at α = 0.
+        assert_eq!(correct(&e, 0.0), c2);
+    }
+
+    #[test]
+    fn a_texture_moved_by_half_a_pixel_is_no_change() {
+        // The surface moved right by half a pixel: each pixel now shows the
+        // mean of the two texels it straddled, and its motion points half
+        // a pixel left.
+        let n = (W * H) as usize;
+        let prev = shadowed(0.0);
+        let cur: Vec<[f32; 4]> = (0..n)
+            .map(|i| {
+                let left = if i % W as usize == 0 { i } else { i - 1 };
+                std::array::from_fn(|c| (prev[i][c] + prev[left][c]) / 2.0)
+            })
+            .collect();
+        let track = vec![0u32; n];
+        let motion = vec![[-0.5f32, 0.0]; n];
+        let depth = vec![1.0f32; n];
+        let c = Current {
+            motion: &motion,
+            ..current(&cur, &track)
+        };
+        let r = ratio(
+            &c,
+            &Previous {
+                color: &prev,
+                depth: &depth,
+                ratio: &[],
+            },
+        );
+        assert!(r.iter().all(|v| v[0] == 0.0));
+        // Against a frame whose surface lies elsewhere in depth (another
+        // object), there is nothing to compare with.
+        let far = vec![3.0f32; n];
+        let lit = shadowed(0.0);
+        let dark = shadowed(W as f32);
+        let r = ratio(
+            &current(&dark, &track),
+            &Previous {
+                color: &lit,
+                depth: &far,
+                ratio: &[],
+            },
+        );
+        assert!(r.iter().all(|v| v[0] == 0.0));
+    }
+
+    #[test]
+    fn dynamic_pixels_and_bad_values_stay_out() {
+        let n = (W * H) as usize;
+        let (c0, mut c1) = (shadowed(12.0), shadowed(30.0));
+        c1[5] = [f32::NAN, f32::INFINITY, -1.0, 1.0];
+        let mut track = vec![0u32; n];
+        track[(4 * W + 20) as usize] = 1;
+        let mut motion = vec![[0.0f32; 2]; n];
+        motion[7] = [f32::NAN, 0.0];
+        motion[8] = [-1e9, 0.0];
+        let mut depth = vec![1.0f32; n];
+        depth[9] = 0.0;
+        let cur = Current {
+            color: &c1,
+            depth: &depth,
+            motion: &motion,
+            track: &track,
+            size: (W, H),
+        };
+        let r = ratio(
+            &cur,
+            &Previous {
+                color: &c0,
+                depth: &depth,
+                ratio: &[],
+            },
+        );
+        for i in [(4 * W + 20) as usize, 7, 8, 9] {
+            assert_eq!(r[i], [0.0; 2], "pixel {i}");
+        }
+        assert!(r.iter().all(|v| v[0].abs() <= MAX_LOG_RATIO && v[1] == 0.0));
+        let f = flow(&r, (W, H));
+        let e = Estimate {
+            color: &c1,
+            track: &track,
+            ratio: &r,
+            flow: &f,
+            size: (W, H),
+        };
+        for alpha in [0.5, 1.0, 3.0, 1e9, f32::NAN] {
+            let out = correct(&e, alpha);
+            assert_eq!(out[(4 * W + 20) as usize], c1[(4 * W + 20) as usize]);
+            for (i, (o, c)) in out.iter().zip(&c1).enumerate() {
+                if c.iter().all(|v| v.is_finite()) {
+                    assert!(o.iter().all(|v| v.is_finite()), "pixel {i} at {alpha}");
+                    assert!(o[0] <= c[0] * MAX_LOG_RATIO.exp() + 1e-6);
+                }
+            }
+        }
+    }
+}
