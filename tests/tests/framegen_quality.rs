@@ -206,7 +206,9 @@ fn interp_beats_repeat_and_on_disocclusion_reproject() {
 /// light orbiting static blocks) gffe with it beats gffe without it, on
 /// `spinning_shadow` too, and where no shading moves (`pan`) it changes
 /// nothing measurable. Measured (192x108, CPU): moving_light 35.77 →
-/// 36.60 dB, spinning_shadow 29.05 → 29.27 dB, pan 56.58 dB either way.
+/// 37.20 dB, spinning_shadow 29.05 → 29.30 dB, pan 56.58 dB either way
+/// (before a fraction of an interval continued only the part of the band
+/// the edge has crossed, moving_light reached 36.60 dB).
 #[test]
 fn shading_correction_moves_the_shading_the_warp_leaves_behind() {
     // With its effects unknown, gffe runs every stage, shading correction
@@ -216,7 +218,7 @@ fn shading_correction_moves_the_shading_the_warp_leaves_behind() {
         shading: false,
         ..shaded
     };
-    for (scene, margin) in [("moving_light", 0.5), ("spinning_shadow", 0.1)] {
+    for (scene, margin) in [("moving_light", 1.0), ("spinning_shadow", 0.1)] {
         let frames = recorded(Scene::load(&format!("builtin:{scene}")).unwrap(), 30, 24);
         let (without, with) = (quality(gffe, &frames), quality(shaded, &frames));
         eprintln!("{scene}: without {without:?}\nwith {with:?}");

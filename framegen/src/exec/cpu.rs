@@ -31,6 +31,8 @@ struct FrameState {
     /// per block; empty without an estimate.
     ratio: Vec<[f32; 2]>,
     flow: Vec<[f32; 4]>,
+    /// Its luminances, written by its estimate for the next one's.
+    luma: Vec<f32>,
 }
 
 /// A rendered frame being ingested (between `upload` and `ingested`).
@@ -73,6 +75,8 @@ pub struct CpuBackend {
     /// The shading-corrected colour of the generated frame being made,
     /// which its warp moves instead of the rendered colour.
     shaded: Option<Vec<[f32; 4]>>,
+    /// `shaded`'s allocation between generated frames.
+    shaded_buffer: Vec<[f32; 4]>,
 }
 
 fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
@@ -168,6 +172,7 @@ impl Executor for CpuBackend {
                 background: Vec::new(),
                 ratio: Vec::new(),
                 flow: Vec::new(),
+                luma: Vec::new(),
             },
             prev,
             spare: self.previous.take(),
@@ -248,7 +253,16 @@ impl Executor for CpuBackend {
         };
         let (f, s) = (&i.state.frame, &i.state);
         let size = (s.camera.width(), s.camera.height());
-        let (ratio, flow) = timed(&mut self.timings, Pass::Shading, || {
+        // The planes of the frame before the previous one, written over.
+        let (mut ratio, mut flow, mut luma) = match i.spare.as_mut() {
+            Some(spare) => (
+                std::mem::take(&mut spare.ratio),
+                std::mem::take(&mut spare.flow),
+                std::mem::take(&mut spare.luma),
+            ),
+            None => Default::default(),
+        };
+        timed(&mut self.timings, Pass::Shading, || {
             let cur = shading::Current {
                 color: &f.color,
                 depth: &f.depth,
@@ -260,13 +274,14 @@ impl Executor for CpuBackend {
                 color: &p.frame.color,
                 depth: &p.frame.depth,
                 ratio: &p.ratio,
+                luma: &p.luma,
             };
-            let ratio = shading::ratio(&cur, &prev);
-            let flow = shading::flow(&ratio, size);
-            (ratio, flow)
+            shading::ratio_into(&cur, &prev, &mut ratio, &mut luma);
+            shading::flow_into(&ratio, size, &mut flow);
         });
         i.state.ratio = ratio;
         i.state.flow = flow;
+        i.state.luma = luma;
         Ok(())
     }
 
@@ -287,7 +302,9 @@ impl Executor for CpuBackend {
         self.timings
             .retain(|p| matches!(p.pass, Pass::History | Pass::Background | Pass::Shading));
         self.out = None;
-        self.shaded = None;
+        if let Some(buffer) = self.shaded.take() {
+            self.shaded_buffer = buffer;
+        }
         Ok(())
     }
 
@@ -314,7 +331,8 @@ impl Executor for CpuBackend {
             return Ok(());
         }
         let f = &cur.frame;
-        self.shaded = Some(timed(&mut self.timings, Pass::Shade, || {
+        let mut shaded = std::mem::take(&mut self.shaded_buffer);
+        let changed = timed(&mut self.timings, Pass::Shade, || {
             let e = shading::Estimate {
                 color: &f.color,
                 track: &cur.history.track,
@@ -322,8 +340,14 @@ impl Executor for CpuBackend {
                 flow: &cur.flow,
                 size: (cur.camera.width(), cur.camera.height()),
             };
-            shading::correct(&e, job.alpha)
-        }));
+            shading::correct_into(&e, job.alpha, &mut shaded)
+        });
+        // Nothing to continue: the warp moves the rendered colour.
+        if changed {
+            self.shaded = Some(shaded);
+        } else {
+            self.shaded_buffer = shaded;
+        }
         Ok(())
     }
 
@@ -390,6 +414,9 @@ impl Executor for CpuBackend {
             warp::close_cracks(&mut out);
             out
         });
+        if let Some(buffer) = shaded {
+            self.shaded_buffer = buffer;
+        }
         self.out = Some(out);
         Ok(())
     }

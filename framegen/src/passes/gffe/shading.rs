@@ -98,10 +98,19 @@ pub const MAX_STEPS: f32 = 4.0;
 pub const QUANTUM: f32 = 1.0 / 256.0;
 
 /// `v` rounded to the nearest [`QUANTUM`] (halves up, as WGSL's `floor`
-/// gives it).
+/// gives it), for `|v|` within a few thousand.
 #[inline]
 pub fn quantize(v: f32) -> f32 {
-    (v / QUANTUM + 0.5).floor() * QUANTUM
+    floor(v / QUANTUM + 0.5) as f32 * QUANTUM
+}
+
+/// `v.floor()` for `v` within `i32`'s range, by a cast (what this pass
+/// asks of it per pixel; `floorf` is a call on this target and cost a
+/// tenth of the estimate). NaN gives 0.
+#[inline]
+fn floor(v: f32) -> i32 {
+    let t = v as i32;
+    t - i32::from(t as f32 > v)
 }
 
 /// Rec. 709 luminance of linear RGB, negatives as 0.
@@ -139,30 +148,31 @@ pub struct Previous<'a> {
     pub depth: &'a [f32],
     /// Its own `(r, aligned r)` per pixel, or empty (no estimate then).
     pub ratio: &'a [[f32; 2]],
+    /// Its luminances plus [`LUMA_FLOOR`] per pixel, as its own estimate
+    /// wrote them, or empty (then computed from `color`).
+    pub luma: &'a [f32],
 }
 
-/// Step 1 for pixel `x`: `(r_t, r_{t−1} aligned)`.
-pub fn ratio_at(x: usize, cur: &Current<'_>, prev: &Previous<'_>) -> [f32; 2] {
+/// Step 1 for pixel `(px, py)` whose luminance plus [`LUMA_FLOOR`] is
+/// `lt`: `(r_t, r_{t−1} aligned)`.
+pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_>) -> [f32; 2] {
     let (w, h) = cur.size;
+    let x = (py * w + px) as usize;
     let d = cur.depth[x];
     if is_dynamic(cur.track[x]) || d.is_nan() || d <= 0.0 {
         return [0.0; 2];
     }
     let m = cur.motion[x];
-    let p = Vec2::new(
-        (x as u32 % w) as f32 + 0.5 + m[0],
-        (x as u32 / w) as f32 + 0.5 + m[1],
-    );
+    let p = Vec2::new(px as f32 + 0.5 + m[0], py as f32 + 0.5 + m[1]);
     // NaN-safe: a position outside (or not a number) has no aligned pixel.
     if !(p.x >= 0.0 && p.x < w as f32 && p.y >= 0.0 && p.y < h as f32) {
         return [0.0; 2];
     }
     let (cx, cy) = (p.x as i32, p.y as i32);
-    let lt = luminance(cur.color[x]) + LUMA_FLOOR;
     // The bilinear footprint of the aligned position: what a sub-pixel
     // shift of the surface's texture could show there.
-    let (bx, by) = ((p.x - 0.5).floor(), (p.y - 0.5).floor());
-    let (tx, ty) = (p.x - 0.5 - bx, p.y - 0.5 - by);
+    let (bx, by) = (floor(p.x - 0.5), floor(p.y - 0.5));
+    let (tx, ty) = (p.x - 0.5 - bx as f32, p.y - 0.5 - by as f32);
     let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
     for (dx, dy, weight) in [
         (0, 0, (1.0 - tx) * (1.0 - ty)),
@@ -170,16 +180,18 @@ pub fn ratio_at(x: usize, cur: &Current<'_>, prev: &Previous<'_>) -> [f32; 2] {
         (0, 1, (1.0 - tx) * ty),
         (1, 1, tx * ty),
     ] {
-        let sx = (bx as i32 + dx).clamp(0, w as i32 - 1) as usize;
-        let sy = (by as i32 + dy).clamp(0, h as i32 - 1) as usize;
+        let sx = (bx + dx).clamp(0, w as i32 - 1) as usize;
+        let sy = (by + dy).clamp(0, h as i32 - 1) as usize;
         let s = sy * w as usize + sx;
-        // Only taps of the pixel's own surface (not across a silhouette).
-        if weight < FOOTPRINT || !same_surface(prev.depth[s], d) {
-            continue;
-        }
-        let l = luminance(prev.color[s]) + LUMA_FLOOR;
-        lo = lo.min(l);
-        hi = hi.max(l);
+        // Only taps of the pixel's own surface (not across a silhouette);
+        // selects rather than branches (luminances are never NaN).
+        let keep = (weight >= FOOTPRINT) & same_surface(prev.depth[s], d);
+        let l = match prev.luma.get(s) {
+            Some(&l) => l,
+            None => luminance(prev.color[s]) + LUMA_FLOOR,
+        };
+        lo = if keep && l < lo { l } else { lo };
+        hi = if keep && l > hi { l } else { hi };
     }
     // No tap on the surface: nothing to compare with.
     let best = if lo > hi {
@@ -198,60 +210,144 @@ pub fn ratio_at(x: usize, cur: &Current<'_>, prev: &Previous<'_>) -> [f32; 2] {
     [quantize(best.clamp(-MAX_LOG_RATIO, MAX_LOG_RATIO)), aligned]
 }
 
+/// Step 1 for every pixel, on all cores, into `out`; frame `t`'s
+/// luminances (plus [`LUMA_FLOOR`]) into `luma`, for the next frame's
+/// estimate to read as its [`Previous::luma`].
+pub fn ratio_into(
+    cur: &Current<'_>,
+    prev: &Previous<'_>,
+    out: &mut Vec<[f32; 2]>,
+    luma: &mut Vec<f32>,
+) {
+    use rayon::prelude::*;
+    let w = cur.size.0 as usize;
+    out.resize(cur.track.len(), [0.0; 2]);
+    luma.resize(cur.track.len(), 0.0);
+    // By rows: no division per pixel for its coordinates.
+    out.par_chunks_mut(w)
+        .zip(luma.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(py, (row, luma))| {
+            let colors = &cur.color[py * w..][..row.len()];
+            for (px, ((r, l), c)) in row.iter_mut().zip(luma).zip(colors).enumerate() {
+                *l = luminance(*c) + LUMA_FLOOR;
+                *r = ratio_at(px as u32, py as u32, *l, cur, prev);
+            }
+        });
+}
+
 /// Step 1 for every pixel, on all cores.
 pub fn ratio(cur: &Current<'_>, prev: &Previous<'_>) -> Vec<[f32; 2]> {
-    use rayon::prelude::*;
-    (0..cur.track.len())
-        .into_par_iter()
-        .map(|x| ratio_at(x, cur, prev))
-        .collect()
+    let mut out = Vec::new();
+    ratio_into(cur, prev, &mut out, &mut Vec::new());
+    out
+}
+
+/// A ratio in [`QUANTUM`]s. Ratios are whole multiples of it within
+/// ±[`MAX_LOG_RATIO`], so this is exact, and so are sums of a block's
+/// worth of them in `f32` (the WGSL kernel's sums): the integer search
+/// below finds what the kernel finds, bit for bit.
+#[inline]
+fn quanta(v: f32) -> i32 {
+    (v / QUANTUM).round() as i32
+}
+
+/// Farthest a displacement reaches: the even search, then the pixel
+/// around its best.
+const REACH: i32 = SEARCH + 1;
+/// Side of the window of `r_{t−1}` a block's search reads.
+const SPAN: usize = (BLOCK as i32 + 2 * REACH) as usize;
+
+/// The search's even displacements, shortest first and, among equally
+/// long ones, in the kernel's row order (`dy`, then `dx`, ascending).
+fn even_displacements() -> &'static [(i32, i32)] {
+    static ORDER: std::sync::OnceLock<Vec<(i32, i32)>> = std::sync::OnceLock::new();
+    ORDER.get_or_init(|| {
+        let mut order: Vec<(i32, i32)> = (-SEARCH..=SEARCH)
+            .step_by(2)
+            .flat_map(|dy| (-SEARCH..=SEARCH).step_by(2).map(move |dx| (dx, dy)))
+            .collect();
+        // Stable: equals keep the row order.
+        order.sort_by_key(|&(dx, dy)| dx * dx + dy * dy);
+        order
+    })
 }
 
 /// Step 2 for block `b`: `[f.x, f.y, energy, 0]` (energy 0: nothing to
 /// track).
+///
+/// The block's `r_t` and the window of aligned `r_{t−1}` around it are
+/// gathered once, in quanta (0 outside the frame); each displacement's
+/// cost is then a sum over two small arrays, given up as soon as it
+/// exceeds the best so far (it could only lose).
 pub fn flow_block(b: usize, ratio: &[[f32; 2]], size: (u32, u32)) -> [f32; 4] {
     let (w, h) = size;
     let (bw, _) = blocks(w, h);
     let (x0, y0) = ((b as u32 % bw) * BLOCK, (b as u32 / bw) * BLOCK);
-    let (x1, y1) = ((x0 + BLOCK).min(w), (y0 + BLOCK).min(h));
-    let mut energy = 0.0f32;
-    for y in y0..y1 {
-        for x in x0..x1 {
-            energy += ratio[(y * w + x) as usize][0].abs();
+    let (cols, rows) = ((x0 + BLOCK).min(w) - x0, (y0 + BLOCK).min(h) - y0);
+    let (cols, rows) = (cols as usize, rows as usize);
+    let mut now = [[0i32; BLOCK as usize]; BLOCK as usize];
+    let mut energy = 0i32;
+    for (y, row) in now.iter_mut().enumerate().take(rows) {
+        let at = (y0 as usize + y) * w as usize + x0 as usize;
+        for (v, r) in row.iter_mut().zip(&ratio[at..at + cols]) {
+            *v = quanta(r[0]);
+            energy += v.abs();
         }
     }
-    if energy.is_nan() || energy < MIN_ENERGY {
+    let energy = energy as f32 * QUANTUM;
+    if energy < MIN_ENERGY {
         return [0.0; 4];
     }
-    let cost = |dx: i32, dy: i32| {
-        let mut cost = 0.0f32;
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let (sx, sy) = (x as i32 - dx, y as i32 - dy);
-                let before = if sx >= 0 && sx < w as i32 && sy >= 0 && sy < h as i32 {
-                    ratio[(sy as u32 * w + sx as u32) as usize][1]
-                } else {
-                    0.0
-                };
-                cost += (ratio[(y * w + x) as usize][0] - before).abs();
+    let mut before = [[0i32; SPAN]; SPAN];
+    for (y, row) in before.iter_mut().enumerate() {
+        let sy = y0 as i32 - REACH + y as i32;
+        if sy < 0 || sy >= h as i32 {
+            continue;
+        }
+        for (x, v) in row.iter_mut().enumerate() {
+            let sx = x0 as i32 - REACH + x as i32;
+            if sx >= 0 && sx < w as i32 {
+                *v = quanta(ratio[(sy as u32 * w + sx as u32) as usize][1]);
             }
         }
-        cost
-    };
-    // (cost, |f|², f): the least cost, then the shortest displacement;
-    // over every even displacement, then the pixel around the best.
-    let mut best = (f32::INFINITY, i32::MAX, 0i32, 0i32);
-    let consider = |best: &mut (f32, i32, i32, i32), dx: i32, dy: i32| {
-        let (c, len) = (cost(dx, dy), dx * dx + dy * dy);
-        if c < best.0 || (c == best.0 && len < best.1) {
-            *best = (c, len, dx, dy);
+    }
+    // Σ|r_t(x) − r_{t−1}(x − d)| in quanta, or `None` once past `limit`.
+    let cost = |dx: i32, dy: i32, limit: i32| {
+        let mut cost = 0i32;
+        for (y, row) in now.iter().enumerate().take(rows) {
+            let from = &before[(y as i32 + REACH - dy) as usize];
+            let from = &from[(REACH - dx) as usize..][..cols];
+            cost += row[..cols]
+                .iter()
+                .zip(from)
+                .map(|(a, b)| (a - b).abs())
+                .sum::<i32>();
+            if cost > limit {
+                return None;
+            }
         }
+        Some(cost)
     };
-    for dy in (-SEARCH..=SEARCH).step_by(2) {
-        for dx in (-SEARCH..=SEARCH).step_by(2) {
-            consider(&mut best, dx, dy);
+    // (cost, |f|², f): the least cost, then the shortest displacement,
+    // then the kernel's order; over every even displacement, then the
+    // pixel around the best. The even ones go shortest first (so a good
+    // bound comes early), and one only replaces the best when it costs
+    // strictly less: what wins is what the kernel's row order finds.
+    let mut best = (i32::MAX, i32::MAX, 0i32, 0i32);
+    for &(dx, dy) in even_displacements() {
+        if let Some(c) = cost(dx, dy, best.0.saturating_sub(1)) {
+            best = (c, dx * dx + dy * dy, dx, dy);
         }
     }
+    let consider = |best: &mut (i32, i32, i32, i32), dx: i32, dy: i32| {
+        let len = dx * dx + dy * dy;
+        if let Some(c) = cost(dx, dy, best.0) {
+            if c < best.0 || (c == best.0 && len < best.1) {
+                *best = (c, len, dx, dy);
+            }
+        }
+    };
     let (cx, cy) = (best.2, best.3);
     for dy in -1..=1 {
         for dx in -1..=1 {
@@ -262,20 +358,29 @@ pub fn flow_block(b: usize, ratio: &[[f32; 2]], size: (u32, u32)) -> [f32; 4] {
     }
     // A change the previous one does not explain, moved, is no shading
     // moving on (resampling noise, a first interval): left alone.
-    if best.0.is_nan() || best.0 > COHERENCE * energy {
+    if best.0 as f32 * QUANTUM > COHERENCE * energy {
         return [0.0; 4];
     }
     [best.2 as f32, best.3 as f32, energy, 0.0]
 }
 
-/// Step 2 for every block, on all cores.
-pub fn flow(ratio: &[[f32; 2]], size: (u32, u32)) -> Vec<[f32; 4]> {
+/// Step 2 for every block, on all cores, into `out`.
+pub fn flow_into(ratio: &[[f32; 2]], size: (u32, u32), out: &mut Vec<[f32; 4]>) {
     use rayon::prelude::*;
     let (bw, bh) = blocks(size.0, size.1);
-    (0..(bw * bh) as usize)
-        .into_par_iter()
-        .map(|b| flow_block(b, ratio, size))
-        .collect()
+    out.clear();
+    out.par_extend(
+        (0..(bw * bh) as usize)
+            .into_par_iter()
+            .map(|b| flow_block(b, ratio, size)),
+    );
+}
+
+/// Step 2 for every block, on all cores.
+pub fn flow(ratio: &[[f32; 2]], size: (u32, u32)) -> Vec<[f32; 4]> {
+    let mut out = Vec::new();
+    flow_into(ratio, size, &mut out);
+    out
 }
 
 /// The estimate of one rendered frame, as the correction reads it.
@@ -300,20 +405,13 @@ fn smoothstep(lo: f32, hi: f32, v: f32) -> f32 {
     t * t * (3.0 - 2.0 * t)
 }
 
-/// Steps 3–4 for pixel `x` at `alpha`: its corrected colour.
-pub fn correct_at(x: usize, e: &Estimate<'_>, alpha: f32) -> [f32; 4] {
-    let c = e.color[x];
-    if is_dynamic(e.track[x]) {
-        return c;
-    }
-    let (w, h) = e.size;
-    let (bw, bh) = blocks(w, h);
-    let (px, py) = (x as u32 % w, x as u32 / w);
-    let (bx, by) = ((px / BLOCK) as i32, (py / BLOCK) as i32);
-    // A block with change of its own moves it by its own motion; one
-    // without takes the motion of the neighbour (3×3) with the most change,
-    // so the pixels a band is about to reach move with it.
-    let mut lender = e.flow[(by as u32 * bw + bx as u32) as usize];
+/// The motion pixels of block `(bx, by)` continue the change along: the
+/// block's own when it has change of its own, else that of its neighbour
+/// (3×3) with the most change, so the pixels a band is about to reach
+/// move with it. `None`: nothing to continue there.
+pub fn lender(flow: &[[f32; 4]], size: (u32, u32), bx: i32, by: i32) -> Option<[f32; 4]> {
+    let (bw, bh) = blocks(size.0, size.1);
+    let mut lender = flow[(by as u32 * bw + bx as u32) as usize];
     if lender[2] <= 0.0 {
         for dy in -1..=1 {
             for dx in -1..=1 {
@@ -321,29 +419,93 @@ pub fn correct_at(x: usize, e: &Estimate<'_>, alpha: f32) -> [f32; 4] {
                 if nx < 0 || ny < 0 || nx >= bw as i32 || ny >= bh as i32 {
                     continue;
                 }
-                let f = e.flow[(ny as u32 * bw + nx as u32) as usize];
+                let f = flow[(ny as u32 * bw + nx as u32) as usize];
                 if f[2] > lender[2] {
                     lender = f;
                 }
             }
         }
     }
-    if lender[2] <= 0.0 {
-        return c;
+    (lender[2] > 0.0).then_some(lender)
+}
+
+/// `r_t` at pixel `(sx, sy)` (given as the floor of a position), 0
+/// outside the frame.
+#[inline]
+fn ratio_nearest(ratio: &[[f32; 2]], size: (u32, u32), sx: f32, sy: f32) -> f32 {
+    let (w, h) = size;
+    if sx >= 0.0 && sx < w as f32 && sy >= 0.0 && sy < h as f32 {
+        ratio[(sy as u32 * w + sx as u32) as usize][0]
+    } else {
+        0.0
     }
+}
+
+/// `r_t` bilinearly at the continuous position `(x, y)` (pixel centres at
+/// `+0.5`), taps outside the frame 0.
+#[inline]
+fn ratio_bilinear(ratio: &[[f32; 2]], size: (u32, u32), x: f32, y: f32) -> f32 {
+    let (bx, by) = ((x - 0.5).floor(), (y - 0.5).floor());
+    let (tx, ty) = (x - 0.5 - bx, y - 0.5 - by);
+    let tap = |dx: f32, dy: f32| ratio_nearest(ratio, size, bx + dx, by + dy);
+    let top = tap(0.0, 0.0) * (1.0 - tx) + tap(1.0, 0.0) * tx;
+    let bottom = tap(0.0, 1.0) * (1.0 - tx) + tap(1.0, 1.0) * tx;
+    top * (1.0 - ty) + bottom * ty
+}
+
+/// Step 3 for pixel `(px, py)`: the log change predicted over `alpha`
+/// intervals along `f`.
+///
+/// With `g` the log shading at `t` and the band model `r_t(y) = g(y) −
+/// g(y + f)` (the shading moves on by `f` per interval), the change over
+/// `α` intervals is `g(x − α·f) − g(x)`. Each whole interval `k` adds
+/// `r_t(x − k·f)`. A last fraction `φ` of an interval, from `y = x −
+/// (k−1)·f`, needs `g(y − φ·f) − g(y)`: `r_t(y − φ·f)` (bilinearly) spans
+/// it and `(1−φ)` of an interval ahead of `y` more, whose change is taken
+/// as that fraction of `r_t(y)`. That is exact for a hard edge (nothing
+/// changes ahead of it) and for a smooth ramp (then `φ·r`, as for a light
+/// dimming in place, `f = 0`). It is kept between 0 and the whole
+/// interval's `r_t(y − f)`: a fraction of an interval changes a pixel
+/// less than all of it does, and a pixel the band has already passed not
+/// at all.
+pub fn predict(
+    ratio: &[[f32; 2]],
+    size: (u32, u32),
+    px: u32,
+    py: u32,
+    f: [f32; 2],
+    alpha: f32,
+) -> f32 {
+    let (cx, cy) = (px as f32 + 0.5, py as f32 + 0.5);
     let mut predicted = 0.0f32;
     let mut left = alpha.clamp(0.0, MAX_STEPS);
     let mut k = 1.0f32;
     while left > 0.0 {
-        let weight = left.min(1.0);
-        let sx = (px as f32 + 0.5 - k * lender[0]).floor();
-        let sy = (py as f32 + 0.5 - k * lender[1]).floor();
-        if sx >= 0.0 && sx < w as f32 && sy >= 0.0 && sy < h as f32 {
-            predicted += weight * e.ratio[(sy as u32 * w + sx as u32) as usize][0];
-        }
+        let whole = ratio_nearest(
+            ratio,
+            size,
+            (cx - k * f[0]).floor(),
+            (cy - k * f[1]).floor(),
+        );
+        predicted += if left >= 1.0 {
+            whole
+        } else {
+            let (yx, yy) = (cx - (k - 1.0) * f[0], cy - (k - 1.0) * f[1]);
+            let part = ratio_bilinear(ratio, size, yx - left * f[0], yy - left * f[1]);
+            let ahead = ratio_nearest(ratio, size, yx.floor(), yy.floor());
+            let change = part - (1.0 - left) * ahead;
+            change.max(whole.min(0.0)).min(whole.max(0.0))
+        };
         left -= 1.0;
         k += 1.0;
     }
+    predicted
+}
+
+/// Step 4 for colour `c` with predicted log change `predicted`: the focus
+/// mask blends the corrected colour in.
+#[inline]
+fn apply(c: [f32; 4], predicted: f32) -> [f32; 4] {
     let m = smoothstep(FOCUS_LOW, FOCUS_HIGH, predicted.abs());
     if m <= 0.0 {
         return c;
@@ -353,13 +515,47 @@ pub fn correct_at(x: usize, e: &Estimate<'_>, alpha: f32) -> [f32; 4] {
     [blend(c[0]), blend(c[1]), blend(c[2]), c[3]]
 }
 
+/// Steps 3–4 for every pixel, on all cores, into `out`. Returns false
+/// (and leaves `out` as it was) when no block has a change to continue:
+/// the colour is then the rendered one as it is.
+pub fn correct_into(e: &Estimate<'_>, alpha: f32, out: &mut Vec<[f32; 4]>) -> bool {
+    use rayon::prelude::*;
+    let (w, h) = e.size;
+    let (bw, bh) = blocks(w, h);
+    let lenders: Vec<Option<[f32; 4]>> = (0..bw * bh)
+        .map(|b| lender(e.flow, e.size, (b % bw) as i32, (b / bw) as i32))
+        .collect();
+    if lenders.iter().all(Option::is_none) {
+        return false;
+    }
+    out.resize(e.color.len(), [0.0; 4]);
+    out.par_chunks_mut(w as usize)
+        .enumerate()
+        .for_each(|(py, row)| {
+            let py = py as u32;
+            let base = (py * w) as usize;
+            let colors = &e.color[base..base + w as usize];
+            let tracks = &e.track[base..base + w as usize];
+            for (px, ((o, &c), &t)) in row.iter_mut().zip(colors).zip(tracks).enumerate() {
+                let px = px as u32;
+                *o = match lenders[((py / BLOCK) * bw + px / BLOCK) as usize] {
+                    Some(f) if !is_dynamic(t) => {
+                        apply(c, predict(e.ratio, e.size, px, py, [f[0], f[1]], alpha))
+                    }
+                    _ => c,
+                };
+            }
+        });
+    true
+}
+
 /// Steps 3–4 for every pixel, on all cores.
 pub fn correct(e: &Estimate<'_>, alpha: f32) -> Vec<[f32; 4]> {
-    use rayon::prelude::*;
-    (0..e.track.len())
-        .into_par_iter()
-        .map(|x| correct_at(x, e, alpha))
-        .collect()
+    let mut out = Vec::new();
+    if !correct_into(e, alpha, &mut out) {
+        out = e.color.to_vec();
+    }
+    out
 }
 
 #[repr(C)]
@@ -549,6 +745,7 @@ mod tests {
             color: &c0,
             depth: &depth,
             ratio: &[],
+            luma: &[],
         };
         let r1 = ratio(&current(&c1, &track), &none);
         let r2 = ratio(
@@ -557,6 +754,7 @@ mod tests {
                 color: &c1,
                 depth: &depth,
                 ratio: &r1,
+                luma: &[],
             },
         );
         // The new band (columns 15–17) changed by the shadow's ratio; the
@@ -594,12 +792,139 @@ mod tests {
         );
         assert_eq!(px(&out, 24), px(&c2, 24));
         assert_eq!(px(&out, 5), px(&c2, 5));
-        // Half an interval: half the change, in log space.
+        // Half an interval: the edge is half-way on, at 19.5. Column 18
+        // has all of the change, column 19 (half covered) half of it in
+        // log space, column 20 none.
         let half = correct(&e, 0.5);
+        let full = px(&c2, 18) * at(&r2, 15)[0].exp();
+        assert!((px(&half, 18) - full).abs() < 1e-5, "{}", px(&half, 18));
         let expect = px(&c2, 19) * (0.5 * at(&r2, 16)[0]).exp();
         assert!((px(&half, 19) - expect).abs() < 1e-5, "{}", px(&half, 19));
+        assert_eq!(px(&half, 20), px(&c2, 20));
         // Nothing at α = 0.
         assert_eq!(correct(&e, 0.0), c2);
+    }
+
+    #[test]
+    fn a_smooth_ramp_and_a_change_in_place_continue_in_proportion() {
+        // A log-linear ramp of shading moving on by 3 px per interval
+        // changes every pixel by the same r each interval: α of an
+        // interval is α·r, as is a light dimming in place (f = 0).
+        let ratio = vec![[-0.6f32, -0.6]; (W * H) as usize];
+        for f in [[3.0, 0.0], [0.0, 0.0], [-2.0, 1.0]] {
+            for (alpha, expect) in [(0.25, -0.15), (0.5, -0.3), (1.0, -0.6), (2.5, -1.5)] {
+                let got = predict(&ratio, (W, H), 24, 8, f, alpha);
+                assert!((got - expect).abs() < 1e-5, "f {f:?} α {alpha}: {got}");
+            }
+        }
+    }
+
+    /// The search as first written: every displacement's cost in full,
+    /// in `f32`, over the frame (the kernel's way).
+    fn exhaustive(b: usize, ratio: &[[f32; 2]], size: (u32, u32)) -> [f32; 4] {
+        let (w, h) = size;
+        let (bw, _) = blocks(w, h);
+        let (x0, y0) = ((b as u32 % bw) * BLOCK, (b as u32 / bw) * BLOCK);
+        let (x1, y1) = ((x0 + BLOCK).min(w), (y0 + BLOCK).min(h));
+        let pixels = || (y0..y1).flat_map(move |y| (x0..x1).map(move |x| (x, y)));
+        let energy: f32 = pixels()
+            .map(|(x, y)| ratio[(y * w + x) as usize][0].abs())
+            .sum();
+        if energy < MIN_ENERGY {
+            return [0.0; 4];
+        }
+        let cost = |dx: i32, dy: i32| -> f32 {
+            pixels()
+                .map(|(x, y)| {
+                    let (sx, sy) = (x as i32 - dx, y as i32 - dy);
+                    let inside = sx >= 0 && sx < w as i32 && sy >= 0 && sy < h as i32;
+                    let before = if inside {
+                        ratio[(sy as u32 * w + sx as u32) as usize][1]
+                    } else {
+                        0.0
+                    };
+                    (ratio[(y * w + x) as usize][0] - before).abs()
+                })
+                .sum()
+        };
+        let mut best = (f32::INFINITY, i32::MAX, 0, 0);
+        let consider = |dx: i32, dy: i32, best: &mut (f32, i32, i32, i32)| {
+            let (c, len) = (cost(dx, dy), dx * dx + dy * dy);
+            if c < best.0 || (c == best.0 && len < best.1) {
+                *best = (c, len, dx, dy);
+            }
+        };
+        for dy in (-SEARCH..=SEARCH).step_by(2) {
+            for dx in (-SEARCH..=SEARCH).step_by(2) {
+                consider(dx, dy, &mut best);
+            }
+        }
+        let (cx, cy) = (best.2, best.3);
+        for (dx, dy) in (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))) {
+            if dx != 0 || dy != 0 {
+                consider(cx + dx, cy + dy, &mut best);
+            }
+        }
+        if best.0 > COHERENCE * energy {
+            return [0.0; 4];
+        }
+        [best.2 as f32, best.3 as f32, energy, 0.0]
+    }
+
+    #[test]
+    fn the_pruned_integer_search_finds_what_the_exhaustive_one_finds() {
+        // Bands of change moving by a few pixels, over noise, on a frame
+        // whose size is no multiple of the block (partial blocks at the
+        // edges), with ties between equal displacements.
+        let (w, h) = (45u32, 21u32);
+        let (bw, bh) = blocks(w, h);
+        let agree = |ratio: &[[f32; 2]], case: i32| {
+            for b in 0..(bw * bh) as usize {
+                assert_eq!(
+                    flow_block(b, ratio, (w, h)),
+                    exhaustive(b, ratio, (w, h)),
+                    "case {case}, block {b}"
+                );
+            }
+        };
+        let mut seed = 12345u32;
+        let mut noise = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        for case in 0..20 {
+            let shift = case % 7 - 3;
+            let ratio: Vec<[f32; 2]> = (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as i32, (i / w) as i32);
+                    let band = |x: i32| ((x + y / 3) % 11) < 3;
+                    let now = if band(x) { -1.5 } else { 0.0 } + 0.3 * (noise() - 0.5);
+                    let before = if band(x + shift) { -1.5 } else { 0.0 };
+                    let before = if case % 3 == 0 {
+                        before
+                    } else {
+                        before + 0.2 * noise()
+                    };
+                    [quantize(now), quantize(before)]
+                })
+                .collect();
+            agree(&ratio, case);
+            assert!(
+                flow(&ratio, (w, h)).iter().any(|f| f[2] > 0.0),
+                "case {case}"
+            );
+        }
+        // Stripes of period 4: moved by 2 px either way they match exactly,
+        // a tie the kernel's row order settles (−2 comes first).
+        let stripes = |x: u32| if x % 4 < 2 { -1.0 } else { 0.0 };
+        let ratio: Vec<[f32; 2]> = (0..w * h)
+            .map(|i| [stripes(i % w), stripes(i % w + 2)])
+            .collect();
+        agree(&ratio, 20);
+        assert_eq!(
+            flow_block(bw as usize + 1, &ratio, (w, h))[..2],
+            [-2.0, 0.0]
+        );
     }
 
     #[test]
@@ -628,6 +953,7 @@ mod tests {
                 color: &prev,
                 depth: &depth,
                 ratio: &[],
+                luma: &[],
             },
         );
         assert!(r.iter().all(|v| v[0] == 0.0));
@@ -642,6 +968,7 @@ mod tests {
                 color: &lit,
                 depth: &far,
                 ratio: &[],
+                luma: &[],
             },
         );
         assert!(r.iter().all(|v| v[0] == 0.0));
@@ -672,6 +999,7 @@ mod tests {
                 color: &c0,
                 depth: &depth,
                 ratio: &[],
+                luma: &[],
             },
         );
         for i in [(4 * W + 20) as usize, 7, 8, 9] {

@@ -203,6 +203,54 @@ fn shading_flow(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) 
     sh_flow[b] = vec4<f32>(f32(best.x), f32(best.y), energy, 0.0);
 }
 
+// r_t at pixel (sx, sy) (the floor of a position), 0 outside the frame.
+fn sh_ratio_nearest(sx: f32, sy: f32) -> f32 {
+    let w = sp.size.x;
+    let h = sp.size.y;
+    if sx >= 0.0 && sx < f32(w) && sy >= 0.0 && sy < f32(h) {
+        return sh_ratio[u32(sy) * w + u32(sx)].x;
+    }
+    return 0.0;
+}
+
+// r_t bilinearly at a continuous position (pixel centres at +0.5).
+fn sh_ratio_bilinear(x: f32, y: f32) -> f32 {
+    let bx = floor(x - 0.5);
+    let by = floor(y - 0.5);
+    let tx = x - 0.5 - bx;
+    let ty = y - 0.5 - by;
+    let top = sh_ratio_nearest(bx, by) * (1.0 - tx) + sh_ratio_nearest(bx + 1.0, by) * tx;
+    let bottom = sh_ratio_nearest(bx, by + 1.0) * (1.0 - tx) + sh_ratio_nearest(bx + 1.0, by + 1.0) * tx;
+    return top * (1.0 - ty) + bottom * ty;
+}
+
+// Step 3: the log change predicted over alpha intervals along f (whole
+// intervals add the band a step on; a last fraction the band part of a
+// step on, less the change ahead of it, kept between 0 and a whole step's).
+fn sh_predict(px: u32, py: u32, f: vec2<f32>, alpha: f32) -> f32 {
+    let cx = f32(px) + 0.5;
+    let cy = f32(py) + 0.5;
+    var predicted = 0.0;
+    var left = clamp(alpha, 0.0, MAX_STEPS);
+    var k = 1.0;
+    while left > 0.0 {
+        let whole = sh_ratio_nearest(floor(cx - k * f.x), floor(cy - k * f.y));
+        if left >= 1.0 {
+            predicted += whole;
+        } else {
+            let yx = cx - (k - 1.0) * f.x;
+            let yy = cy - (k - 1.0) * f.y;
+            let part = sh_ratio_bilinear(yx - left * f.x, yy - left * f.y);
+            let ahead = sh_ratio_nearest(floor(yx), floor(yy));
+            let change = part - (1.0 - left) * ahead;
+            predicted += min(max(change, min(whole, 0.0)), max(whole, 0.0));
+        }
+        left -= 1.0;
+        k += 1.0;
+    }
+    return predicted;
+}
+
 // Steps 3-4: the corrected colour at alpha.
 @compute @workgroup_size(256)
 fn shading_correct(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -244,19 +292,7 @@ fn shading_correct(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroup
     if lender.z <= 0.0 {
         return;
     }
-    var predicted = 0.0;
-    var left = clamp(sp.alpha.x, 0.0, MAX_STEPS);
-    var k = 1.0;
-    while left > 0.0 {
-        let weight = min(left, 1.0);
-        let sx = floor(f32(px) + 0.5 - k * lender.x);
-        let sy = floor(f32(py) + 0.5 - k * lender.y);
-        if sx >= 0.0 && sx < f32(w) && sy >= 0.0 && sy < f32(h) {
-            predicted += weight * sh_ratio[u32(sy) * w + u32(sx)].x;
-        }
-        left -= 1.0;
-        k += 1.0;
-    }
+    let predicted = sh_predict(px, py, lender.xy, sp.alpha.x);
     let m = smoothstep(FOCUS_LOW, FOCUS_HIGH, abs(predicted));
     if m <= 0.0 {
         return;
