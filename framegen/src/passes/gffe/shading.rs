@@ -445,7 +445,7 @@ fn ratio_nearest(ratio: &[[f32; 2]], size: (u32, u32), sx: f32, sy: f32) -> f32 
 /// `+0.5`), taps outside the frame 0.
 #[inline]
 fn ratio_bilinear(ratio: &[[f32; 2]], size: (u32, u32), x: f32, y: f32) -> f32 {
-    let (bx, by) = ((x - 0.5).floor(), (y - 0.5).floor());
+    let (bx, by) = (floor(x - 0.5) as f32, floor(y - 0.5) as f32);
     let (tx, ty) = (x - 0.5 - bx, y - 0.5 - by);
     let tap = |dx: f32, dy: f32| ratio_nearest(ratio, size, bx + dx, by + dy);
     let top = tap(0.0, 0.0) * (1.0 - tx) + tap(1.0, 0.0) * tx;
@@ -484,15 +484,15 @@ pub fn predict(
         let whole = ratio_nearest(
             ratio,
             size,
-            (cx - k * f[0]).floor(),
-            (cy - k * f[1]).floor(),
+            floor(cx - k * f[0]) as f32,
+            floor(cy - k * f[1]) as f32,
         );
         predicted += if left >= 1.0 {
             whole
         } else {
             let (yx, yy) = (cx - (k - 1.0) * f[0], cy - (k - 1.0) * f[1]);
             let part = ratio_bilinear(ratio, size, yx - left * f[0], yy - left * f[1]);
-            let ahead = ratio_nearest(ratio, size, yx.floor(), yy.floor());
+            let ahead = ratio_nearest(ratio, size, floor(yx) as f32, floor(yy) as f32);
             let change = part - (1.0 - left) * ahead;
             change.max(whole.min(0.0)).min(whole.max(0.0))
         };
