@@ -236,13 +236,6 @@ pub fn ratio_into(
         });
 }
 
-/// Step 1 for every pixel, on all cores.
-pub fn ratio(cur: &Current<'_>, prev: &Previous<'_>) -> Vec<[f32; 2]> {
-    let mut out = Vec::new();
-    ratio_into(cur, prev, &mut out, &mut Vec::new());
-    out
-}
-
 /// A ratio in [`QUANTUM`]s. Ratios are whole multiples of it within
 /// ±[`MAX_LOG_RATIO`], so this is exact, and so are sums of a block's
 /// worth of them in `f32` (the WGSL kernel's sums): the integer search
@@ -374,13 +367,6 @@ pub fn flow_into(ratio: &[[f32; 2]], size: (u32, u32), out: &mut Vec<[f32; 4]>) 
             .into_par_iter()
             .map(|b| flow_block(b, ratio, size)),
     );
-}
-
-/// Step 2 for every block, on all cores.
-pub fn flow(ratio: &[[f32; 2]], size: (u32, u32)) -> Vec<[f32; 4]> {
-    let mut out = Vec::new();
-    flow_into(ratio, size, &mut out);
-    out
 }
 
 /// The estimate of one rendered frame, as the correction reads it.
@@ -549,15 +535,6 @@ pub fn correct_into(e: &Estimate<'_>, alpha: f32, out: &mut Vec<[f32; 4]>) -> bo
     true
 }
 
-/// Steps 3–4 for every pixel, on all cores.
-pub fn correct(e: &Estimate<'_>, alpha: f32) -> Vec<[f32; 4]> {
-    let mut out = Vec::new();
-    if !correct_into(e, alpha, &mut out) {
-        out = e.color.to_vec();
-    }
-    out
-}
-
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
@@ -708,6 +685,30 @@ impl GpuShading {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Step 1 for every pixel, into a new plane.
+    fn ratio(cur: &Current<'_>, prev: &Previous<'_>) -> Vec<[f32; 2]> {
+        let mut out = Vec::new();
+        ratio_into(cur, prev, &mut out, &mut Vec::new());
+        out
+    }
+
+    /// Step 2 for every block, into a new plane.
+    fn flow(ratio: &[[f32; 2]], size: (u32, u32)) -> Vec<[f32; 4]> {
+        let mut out = Vec::new();
+        flow_into(ratio, size, &mut out);
+        out
+    }
+
+    /// Steps 3–4 for every pixel, into a new image (the colour as it is
+    /// where nothing is continued).
+    fn correct(e: &Estimate<'_>, alpha: f32) -> Vec<[f32; 4]> {
+        let mut out = Vec::new();
+        if !correct_into(e, alpha, &mut out) {
+            out = e.color.to_vec();
+        }
+        out
+    }
 
     const W: u32 = 48;
     const H: u32 = 16;
