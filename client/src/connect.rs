@@ -193,7 +193,12 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
         version: config.version,
         client_name: config.client_name.clone(),
         token: config.token.clone(),
-        codecs: vec![Codec::Raw, Codec::Zstd],
+        codecs: vec![
+            Codec::Raw,
+            Codec::Zstd,
+            Codec::QuantDepth,
+            Codec::MotionResidual,
+        ],
         max_size: FrameSize::new(config.limits.max_dimension, config.limits.max_dimension),
         window_modes: vec![WindowMode::KeepDensity, WindowMode::KeepSize],
         extras: vec![],

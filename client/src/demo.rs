@@ -104,7 +104,7 @@ fn start_local_from(
     let identity_dir = tempfile::tempdir()?;
     let identity = Identity::load_or_create(identity_dir.path())?;
     let token = host::session::random_token();
-    let buffers = StreamBuffer::default_set(Codec::Zstd).to_vec();
+    let buffers = StreamBuffer::compact_set(Codec::Zstd).to_vec();
     let policy = Policy {
         token: token.clone(),
         server_name: "in-process demo server".into(),

@@ -56,7 +56,7 @@ struct RunArgs {
     #[arg(long)]
     every_stage: bool,
     /// Rendered size (in-process server).
-    #[arg(long, default_value = "320x180", value_parser = parse_size)]
+    #[arg(long, default_value = "320x180", value_parser = clap::value_parser!(FrameSize))]
     size: FrameSize,
     /// Render rate (in-process server).
     #[arg(long, default_value_t = 30.0)]
@@ -136,16 +136,6 @@ impl Default for RunArgs {
     }
 }
 
-fn parse_size(s: &str) -> Result<FrameSize, String> {
-    let (w, h) = s.split_once('x').ok_or("expected WIDTHxHEIGHT")?;
-    let w = w.parse().map_err(|e| format!("width: {e}"))?;
-    let h = h.parse().map_err(|e| format!("height: {e}"))?;
-    protocol::Limits::default()
-        .check_size(w, h)
-        .map_err(|e| e.to_string())?;
-    Ok(FrameSize::new(w, h))
-}
-
 #[derive(Subcommand)]
 enum Command {
     /// Receive frames, generate the in-between ones and present them
@@ -186,7 +176,7 @@ struct EvalArgs {
     #[arg(long, default_value = "eval-report")]
     out: PathBuf,
     /// Displayed size of rendered scenes.
-    #[arg(long, default_value = "320x180", value_parser = parse_size)]
+    #[arg(long, default_value = "320x180", value_parser = clap::value_parser!(FrameSize))]
     size: FrameSize,
     /// Display rate of rendered scenes (the render rate is fps / (n + 1)).
     #[arg(long, default_value_t = 60.0)]
@@ -212,7 +202,7 @@ struct EvalArgs {
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// Extra resolutions (the methods at their defaults) for the first scene, e.g. 640x360,960x540.
-    #[arg(long, value_delimiter = ',', value_parser = parse_size)]
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(FrameSize))]
     resolutions: Vec<FrameSize>,
     /// Fed frames before scoring starts.
     #[arg(long, default_value_t = 2)]

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use protocol::assemble::encode_frame;
+use protocol::assemble::encode_frame_after;
 use protocol::import::AnyDump;
 use protocol::wire::StreamBuffer;
 use protocol::{Frame, FrameSize};
@@ -366,6 +366,10 @@ impl Producer {
         // after it is a cut (as `import` does): the client must not blend
         // across the gap. A dump whose every frame fails in a row stops.
         let mut gap = Gap::default();
+        // The last frame sent: the quantised codecs code motion against the
+        // camera's motion since then (a skipped frame only makes that
+        // prediction, never the result, less exact).
+        let mut previous: Option<protocol::FrameMeta> = None;
         while !stop.load(Ordering::Relaxed) && !self.finished(k) {
             let times = self.times(k);
             let Some((t, next)) = self.readable(times, k, stats, &mut gap)? else {
@@ -395,7 +399,13 @@ impl Producer {
             };
             gap.run = 0;
             frame.meta.cut |= std::mem::take(&mut gap.cut_next);
-            let encoded = encode_frame(&frame, buffers, protocol::codec::DEFAULT_ZSTD_LEVEL)?;
+            let encoded = encode_frame_after(
+                &frame,
+                previous.as_ref(),
+                buffers,
+                protocol::codec::DEFAULT_ZSTD_LEVEL,
+            )?;
+            previous = Some(frame.meta);
             // Host processing = render (or read) + encode, as a duration.
             frame.meta.host_processing =
                 frame.meta.host_processing.saturating_add(started.elapsed());

@@ -33,6 +33,41 @@ impl FrameSize {
     }
 }
 
+/// A size that `WIDTHxHEIGHT` text does not give.
+#[derive(Debug, thiserror::Error)]
+pub enum ParseSizeError {
+    /// No `x` between the two numbers.
+    #[error("expected WIDTHxHEIGHT, e.g. 1280x720")]
+    Format,
+    /// A side that is not a number.
+    #[error("{side}: {source}")]
+    Number {
+        /// `width` or `height`.
+        side: &'static str,
+        /// Why.
+        source: std::num::ParseIntError,
+    },
+    /// Sides outside the default [`Limits`].
+    #[error(transparent)]
+    Invalid(#[from] ValidationError),
+}
+
+impl std::str::FromStr for FrameSize {
+    type Err = ParseSizeError;
+
+    /// `WIDTHxHEIGHT` (e.g. `1280x720`), within the default [`Limits`].
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let (w, h) = s.split_once('x').ok_or(ParseSizeError::Format)?;
+        let side = |side, v: &str| {
+            v.parse::<u32>()
+                .map_err(|source| ParseSizeError::Number { side, source })
+        };
+        let (w, h) = (side("width", w)?, side("height", h)?);
+        Limits::default().check_size(w, h)?;
+        Ok(FrameSize::new(w, h))
+    }
+}
+
 /// Everything about a rendered frame except its pixels.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FrameMeta {
@@ -223,8 +258,14 @@ impl BufferDesc {
                 format: self.format,
             });
         }
+        if !self.codec.suits(self.kind, self.format) {
+            return Err(ValidationError::CodecNotSuited {
+                kind: self.kind,
+                codec: self.codec,
+            });
+        }
         let raw = self.format.raw_len(size);
-        let (min, max) = self.codec.encoded_len_range(raw);
+        let (min, max) = self.codec.encoded_len_range(self.format, raw);
         let max = max.min(limits.max_payload);
         if self.payload_len < min || self.payload_len > max {
             return Err(ValidationError::PayloadLength {
@@ -522,6 +563,21 @@ pub(crate) mod tests {
                 .collect(),
             extras: vec![],
         }
+    }
+
+    #[test]
+    fn sizes_parse_from_text_within_the_limits() {
+        assert_eq!(
+            "1280x720".parse::<FrameSize>().unwrap(),
+            FrameSize::new(1280, 720)
+        );
+        for bad in ["1280", "x720", "12a0x720", "0x720", "9000x10", "-1x5", ""] {
+            assert!(bad.parse::<FrameSize>().is_err(), "{bad}");
+        }
+        assert!(matches!(
+            "640-360".parse::<FrameSize>(),
+            Err(ParseSizeError::Format)
+        ));
     }
 
     #[test]

@@ -88,6 +88,15 @@ pub enum ValidationError {
         /// The rejected format.
         format: PixelFormat,
     },
+    /// A codec that cannot carry a buffer kind (the quantised codecs carry
+    /// only the buffer they model).
+    #[error("codec {codec:?} cannot carry {kind:?} buffers")]
+    CodecNotSuited {
+        /// The buffer kind.
+        kind: BufferKind,
+        /// The rejected codec.
+        codec: Codec,
+    },
     /// A payload length that does not fit the dimensions, format and codec.
     #[error(
         "{kind:?} payload of {len} bytes does not fit {codec:?} ({min}..={max} bytes expected)"
@@ -163,7 +172,7 @@ impl Limits {
         Self {
             max_dimension: max.width.max(max.height),
             max_pixels: pixels,
-            max_payload: codec::zstd_compress_bound(pixels.saturating_mul(8)),
+            max_payload: codec::zstd_compress_bound(pixels.saturating_mul(8)) + codec::MAX_HEADER,
             ..Self::default()
         }
     }
@@ -205,9 +214,9 @@ impl Default for Limits {
             max_dimension: Self::MAX_DIMENSION,
             max_pixels: u64::from(Self::MAX_DIMENSION) * u64::from(Self::MAX_DIMENSION),
             // The largest raw buffer (8192² pixels at 8 bytes: RGBA f16, RG
-            // f32), encoded by the codec that can grow it most (zstd on
-            // incompressible data).
-            max_payload: codec::zstd_compress_bound(8192 * 8192 * 8),
+            // f32, or motion residuals), encoded by the codec that can grow
+            // it most (zstd on incompressible data, after a codec header).
+            max_payload: codec::zstd_compress_bound(8192 * 8192 * 8) + codec::MAX_HEADER,
             max_control: 64 * 1024,
         }
     }

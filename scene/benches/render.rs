@@ -15,10 +15,7 @@ use scene::{Scene, builtin};
 fn size() -> FrameSize {
     std::env::var("RENDER_BENCH_SIZE")
         .ok()
-        .and_then(|s| {
-            let (w, h) = s.split_once('x')?;
-            Some(FrameSize::new(w.parse().ok()?, h.parse().ok()?))
-        })
+        .and_then(|s| s.parse().ok())
         .unwrap_or(FrameSize::new(1280, 720))
 }
 

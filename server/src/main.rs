@@ -53,7 +53,7 @@ struct RecordArgs {
     #[arg(long, default_value_t = 30.0)]
     fps: f64,
     /// Size as WIDTHxHEIGHT.
-    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    #[arg(long, default_value = "1280x720", value_parser = clap::value_parser!(FrameSize))]
     size: FrameSize,
     /// Duration in seconds.
     #[arg(long, default_value_t = 2.0)]
@@ -106,14 +106,19 @@ Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
         #[arg(long, default_value_t = 30.0)]
         fps: f64,
         /// Displayed size for scenes, WIDTHxHEIGHT.
-        #[arg(long, default_value = "640x360", value_parser = parse_size)]
+        #[arg(long, default_value = "640x360", value_parser = clap::value_parser!(FrameSize))]
         size: FrameSize,
         /// Adaptive rendering window for scenes.
         #[arg(long, default_value = "off", value_parser = parse_window)]
         window: WindowMode,
-        /// Color codec (depth and motion always use zstd).
+        /// Color codec.
         #[arg(long, default_value = "raw", value_parser = parse_codec)]
         color_codec: protocol::Codec,
+        /// How depth and motion travel: `compact` (depth quantised with a
+        /// bounded error, motion as the residual over the camera) or
+        /// `lossless` (zstd).
+        #[arg(long, value_enum, default_value_t = Geometry::Compact)]
+        geometry: Geometry,
         /// Most sessions at once; one more is refused as "server full".
         #[arg(long, default_value_t = host::session::DEFAULT_MAX_SESSIONS)]
         max_sessions: usize,
@@ -157,6 +162,16 @@ Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
     },
 }
 
+/// `server serve --geometry`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum Geometry {
+    /// Depth within 6·10⁻⁵ relative and 0.05 px of reprojection; motion
+    /// within 1/256 px (issue 19).
+    Compact,
+    /// Depth and motion exactly as rendered, zstd.
+    Lossless,
+}
+
 /// `server import --format`.
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 enum ImportFormat {
@@ -183,18 +198,6 @@ fn parse_window(s: &str) -> Result<WindowMode, String> {
         "keep-size" => Ok(WindowMode::KeepSize),
         _ => Err("expected off, keep-density or keep-size".into()),
     }
-}
-
-fn parse_size(s: &str) -> Result<FrameSize, String> {
-    let (w, h) = s
-        .split_once('x')
-        .ok_or("expected WIDTHxHEIGHT, e.g. 1280x720")?;
-    let w: u32 = w.parse().map_err(|e| format!("width: {e}"))?;
-    let h: u32 = h.parse().map_err(|e| format!("height: {e}"))?;
-    protocol::Limits::default()
-        .check_size(w, h)
-        .map_err(|e| e.to_string())?;
-    Ok(FrameSize::new(w, h))
 }
 
 /// An error ends the process with one line on stderr (the whole chain, no
@@ -224,6 +227,7 @@ fn command(cli: Cli) -> anyhow::Result<()> {
             size,
             window,
             color_codec,
+            geometry,
             max_sessions,
             congestion,
         } => {
@@ -259,6 +263,7 @@ fn command(cli: Cli) -> anyhow::Result<()> {
                 token,
                 window,
                 color_codec,
+                geometry,
                 max_sessions,
                 congestion,
             }))
@@ -384,6 +389,7 @@ struct ServeArgs {
     token: Option<String>,
     window: WindowMode,
     color_codec: protocol::Codec,
+    geometry: Geometry,
     max_sessions: usize,
     congestion: host::tls::Congestion,
 }
@@ -392,7 +398,11 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let identity = host::tls::Identity::load_or_create(&args.identity)?;
     let token = args.token.unwrap_or_else(host::session::random_token);
     anyhow::ensure!(!token.is_empty(), "--token must not be empty");
-    let buffers = protocol::wire::StreamBuffer::default_set(args.color_codec).to_vec();
+    let buffers = match args.geometry {
+        Geometry::Compact => protocol::wire::StreamBuffer::compact_set(args.color_codec),
+        Geometry::Lossless => protocol::wire::StreamBuffer::default_set(args.color_codec),
+    }
+    .to_vec();
     let max_frame = host::session::max_frame(
         args.size,
         &WindowSettings {

@@ -27,10 +27,7 @@ fn sizes() -> Vec<FrameSize> {
     let s = std::env::var("FRAMEGEN_BENCH_SIZES")
         .unwrap_or_else(|_| "960x540,1280x720,1920x1080".into());
     s.split(',')
-        .map(|s| {
-            let (w, h) = s.split_once('x').expect("WIDTHxHEIGHT");
-            FrameSize::new(w.parse().expect("width"), h.parse().expect("height"))
-        })
+        .map(|s| s.parse().expect("WIDTHxHEIGHT"))
         .collect()
 }
 

@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use protocol::assemble::encode_frame;
+use protocol::assemble::{encode_frame, encode_frame_after};
 use protocol::codec::{Codec, DEFAULT_ZSTD_LEVEL};
 use protocol::dump::{DumpWriter, Manifest, frame_paths};
 use protocol::wire::{self, Hello, Message, StreamBuffer, WIRE_VERSION, WindowMode};
@@ -53,10 +53,15 @@ fn main() -> anyhow::Result<()> {
     let frames: Vec<_> = (0..2)
         .map(|i| tests::render(i, 60.0, DVec3::ZERO, SIZE))
         .collect();
-    for (c, color) in [Codec::Raw, Codec::Zstd].into_iter().enumerate() {
-        let buffers = StreamBuffer::default_set(color);
+    let sets = [
+        StreamBuffer::default_set(Codec::Raw),
+        StreamBuffer::default_set(Codec::Zstd),
+        StreamBuffer::compact_set(Codec::Zstd),
+    ];
+    for (c, buffers) in sets.iter().enumerate() {
         for (i, frame) in frames.iter().enumerate() {
-            let encoded = encode_frame(frame, &buffers, DEFAULT_ZSTD_LEVEL)?;
+            let previous = i.checked_sub(1).map(|p| &frames[p].meta);
+            let encoded = encode_frame_after(frame, previous, buffers, DEFAULT_ZSTD_LEVEL)?;
             write(
                 &out.join("decode"),
                 &format!("frame-{c}-{i}"),
@@ -68,7 +73,13 @@ fn main() -> anyhow::Result<()> {
                 .zip(&encoded.header.buffers)
                 .enumerate()
             {
-                let pick = u8::from(desc.codec == Codec::Zstd) | format_index(desc.format) << 1;
+                // The codec target's first byte: the codec (two bits, in
+                // the target's order), then the format.
+                let codec = Codec::ALL
+                    .iter()
+                    .position(|c| *c == desc.codec)
+                    .unwrap_or(0) as u8;
+                let pick = codec | format_index(desc.format) << 2;
                 let seed = [
                     &[pick][..],
                     &(SIZE.pixels() as u16).to_le_bytes(),

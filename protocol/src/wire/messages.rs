@@ -291,12 +291,29 @@ impl StreamBuffer {
         ]
     }
 
-    /// Checks that the format suits the kind.
+    /// The set for a stream at real bitrates (issue 19): depth quantised
+    /// with a bounded error and motion as the residual over the camera
+    /// ([`Codec::QuantDepth`], [`Codec::MotionResidual`]); `color` as in
+    /// [`StreamBuffer::default_set`].
+    pub fn compact_set(color: Codec) -> [StreamBuffer; 3] {
+        let [color, mut depth, mut motion] = Self::default_set(color);
+        depth.codec = Codec::QuantDepth;
+        motion.codec = Codec::MotionResidual;
+        [color, depth, motion]
+    }
+
+    /// Checks that the format and the codec suit the kind.
     pub fn validate(&self) -> Result<(), ValidationError> {
         if !self.kind.allowed_formats().contains(&self.format) {
             return Err(ValidationError::FormatNotAllowed {
                 kind: self.kind,
                 format: self.format,
+            });
+        }
+        if !self.codec.suits(self.kind, self.format) {
+            return Err(ValidationError::CodecNotSuited {
+                kind: self.kind,
+                codec: self.codec,
             });
         }
         Ok(())

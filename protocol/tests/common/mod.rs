@@ -112,7 +112,7 @@ pub fn buffers(size: FrameSize) -> impl Strategy<Value = Vec<BufferDesc>> {
                 .map(|(kind, (codec, f, frac))| {
                     let formats = kind.allowed_formats();
                     let format = formats[f % formats.len()];
-                    let (min, max) = codec.encoded_len_range(format.raw_len(size));
+                    let (min, max) = codec.encoded_len_range(format, format.raw_len(size));
                     let max = max.min(protocol::Limits::default().max_payload);
                     let payload_len = min + ((max - min) as f64 * frac) as u64;
                     BufferDesc {

@@ -1,4 +1,6 @@
-//! Buffer codecs (DESIGN §7): raw, and lossless zstd for depth and motion.
+//! Buffer codecs (DESIGN §7): raw; lossless zstd; and for a stream at real
+//! bitrates (issue 19), depth quantised with a stated error bound
+//! ([`depth`]) and motion as a residual over the camera ([`motion`]).
 //!
 //! [`Codec::Zstd`] first splits the pixels into byte planes (byte 0 of every
 //! channel value, then byte 1, …): the sign/exponent bytes of neighbouring
@@ -9,7 +11,11 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::PixelFormat;
+use crate::{BufferKind, PixelFormat};
+
+pub mod depth;
+pub mod motion;
+mod planar;
 
 /// zstd level used by [`encode`]: level 1 is the fastest that still compresses
 /// depth and motion well; pass another to [`encode_with_level`].
@@ -22,6 +28,12 @@ pub enum Codec {
     Raw,
     /// Byte-plane shuffle, then zstd (lossless).
     Zstd,
+    /// Depth quantised with a bounded error ([`depth`]): relative error
+    /// ≤ 6·10⁻⁵, reprojection error ≤ 0.05 px; sky and NaN exact.
+    QuantDepth,
+    /// Motion minus the camera-induced motion, quantised to 1/128 px
+    /// ([`motion`]); decoding needs the frame's depth.
+    MotionResidual,
 }
 
 /// A buffer that cannot be encoded or decoded.
@@ -46,6 +58,22 @@ pub enum CodecError {
         /// Bytes announced.
         expected: u64,
     },
+    /// A lossy codec's parameters or header are unusable.
+    #[error("bad {0}")]
+    BadParameters(&'static str),
+    /// The codec needs the frame's depth (it is decoded from the frame).
+    #[error("motion residuals decode against the frame's depth, which was not given")]
+    NeedsDepth,
+    /// The codec cannot carry this buffer.
+    #[error("{codec:?} cannot carry a {kind:?} buffer as {format:?}")]
+    Unsuited {
+        /// The codec.
+        codec: Codec,
+        /// The buffer.
+        kind: BufferKind,
+        /// Its format.
+        format: PixelFormat,
+    },
     /// The encoded payload is longer than a codec can produce for the size.
     #[error("encoded payload of {len} bytes is outside {min}..={max} for this codec")]
     EncodedLength {
@@ -59,15 +87,61 @@ pub enum CodecError {
 }
 
 impl Codec {
+    /// Every codec, in declaration order.
+    pub const ALL: [Codec; 4] = [
+        Codec::Raw,
+        Codec::Zstd,
+        Codec::QuantDepth,
+        Codec::MotionResidual,
+    ];
+
     /// The range of encoded lengths this codec can produce for `raw` bytes of
-    /// input. Used to reject inconsistent headers before any allocation.
-    pub fn encoded_len_range(self, raw: u64) -> (u64, u64) {
+    /// `format` pixels. Used to reject inconsistent headers before any
+    /// allocation.
+    pub fn encoded_len_range(self, format: PixelFormat, raw: u64) -> (u64, u64) {
         match self {
             Codec::Raw => (raw, raw),
             Codec::Zstd => (1, zstd_compress_bound(raw)),
+            // Four bytes of code a pixel.
+            Codec::QuantDepth => {
+                let codes = raw / u64::from(format.bytes_per_pixel().max(1)) * 4;
+                (
+                    depth::HEADER as u64 + 1,
+                    depth::HEADER as u64 + zstd_compress_bound(codes),
+                )
+            }
+            // Two four-byte residuals a pixel.
+            Codec::MotionResidual => {
+                let codes = raw / u64::from(format.bytes_per_pixel().max(1)) * 8;
+                (
+                    motion::HEADER as u64 + 1,
+                    motion::HEADER as u64 + zstd_compress_bound(codes),
+                )
+            }
         }
     }
+
+    /// Whether this codec can carry buffer `kind` as `format`: the lossless
+    /// ones carry anything, the quantised ones only what they model.
+    pub fn suits(self, kind: BufferKind, format: PixelFormat) -> bool {
+        match self {
+            Codec::Raw | Codec::Zstd => true,
+            Codec::QuantDepth => kind == BufferKind::Depth && format == PixelFormat::R32Float,
+            Codec::MotionResidual => {
+                kind == BufferKind::Motion
+                    && matches!(format, PixelFormat::Rg32Float | PixelFormat::Rg16Float)
+            }
+        }
+    }
+
+    /// True for codecs whose output equals their input.
+    pub fn is_lossless(self) -> bool {
+        matches!(self, Codec::Raw | Codec::Zstd)
+    }
 }
+
+/// The most bytes of header a codec puts before its data.
+pub const MAX_HEADER: u64 = motion::HEADER as u64;
 
 /// `ZSTD_COMPRESSBOUND` from zstd.h, in `u64`: the largest output zstd
 /// produces for `src` input bytes (one frame).
@@ -91,27 +165,112 @@ pub fn encode_with_level(
 ) -> Result<Vec<u8>, CodecError> {
     match codec {
         Codec::Raw => Ok(raw.to_vec()),
-        Codec::Zstd => {
-            let planes = shuffle(raw, format.channel_bytes() as usize)?;
-            let mut z = zstd::bulk::Compressor::new(level).map_err(CodecError::Zstd)?;
-            // A 4-byte checksum per frame turns corruption into an error
-            // instead of wrong pixels.
-            z.include_checksum(true).map_err(CodecError::Zstd)?;
-            z.compress(&planes).map_err(CodecError::Zstd)
+        Codec::Zstd => zstd_pack(raw, format.channel_bytes() as usize, level),
+        // Without a frame around it, depth gets the relative scale.
+        Codec::QuantDepth => {
+            check_suits(codec, BufferKind::Depth, format)?;
+            let values = f32_values(raw)?;
+            depth::encode(
+                &depth::Quantizer::relative(),
+                &values,
+                plane_width(values.len()),
+                level,
+            )
         }
+        Codec::MotionResidual => Err(CodecError::NeedsDepth),
     }
+}
+
+/// Byte-plane shuffle of `unit`-byte values, then zstd at `level` with a
+/// content checksum.
+fn zstd_pack(raw: &[u8], unit: usize, level: i32) -> Result<Vec<u8>, CodecError> {
+    zstd_compress(&shuffle(raw, unit)?, level)
+}
+
+/// zstd at `level` with a content checksum: corruption becomes an error
+/// instead of wrong pixels.
+pub(crate) fn zstd_compress(bytes: &[u8], level: i32) -> Result<Vec<u8>, CodecError> {
+    let mut z = zstd::bulk::Compressor::new(level).map_err(CodecError::Zstd)?;
+    z.include_checksum(true).map_err(CodecError::Zstd)?;
+    z.compress(bytes).map_err(CodecError::Zstd)
+}
+
+/// Exactly `expected` bytes out of a zstd frame, or an error.
+pub(crate) fn zstd_decompress(encoded: &[u8], expected: usize) -> Result<Vec<u8>, CodecError> {
+    let bytes = zstd::bulk::decompress(encoded, expected).map_err(CodecError::Zstd)?;
+    if bytes.len() != expected {
+        return Err(CodecError::WrongLength {
+            got: bytes.len() as u64,
+            expected: expected as u64,
+        });
+    }
+    Ok(bytes)
+}
+
+/// Inverse of [`zstd_pack`]: exactly `expected` bytes, or an error.
+fn zstd_unpack(encoded: &[u8], expected: usize, unit: usize) -> Result<Vec<u8>, CodecError> {
+    unshuffle(&zstd_decompress(encoded, expected)?, unit)
+}
+
+fn check_suits(codec: Codec, kind: BufferKind, format: PixelFormat) -> Result<(), CodecError> {
+    if codec.suits(kind, format) {
+        Ok(())
+    } else {
+        Err(CodecError::Unsuited {
+            codec,
+            kind,
+            format,
+        })
+    }
+}
+
+/// `v` rounded half away from zero to an `i32` (saturating; NaN gives 0),
+/// by a truncating cast rather than a call to `round`.
+pub(crate) fn round_i32(v: f64) -> i32 {
+    (v + 0.5f64.copysign(v)) as i32
+}
+
+/// A plane of `n` values with no width known: one row.
+fn plane_width(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX).max(1)
+}
+
+fn f32_values(raw: &[u8]) -> Result<Vec<f32>, CodecError> {
+    if raw.len() % 4 != 0 {
+        return Err(CodecError::Misaligned {
+            len: raw.len(),
+            unit: 4,
+        });
+    }
+    Ok(raw
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect())
 }
 
 /// Decodes an `encoded` payload of `format` pixels with `codec`, producing
 /// exactly `expected_len` bytes or an error. `expected_len` must already be
 /// validated against the limits: it is the only size allocated.
+/// [`Codec::MotionResidual`] needs the frame's depth: see [`decode_with`].
 pub fn decode(
     codec: Codec,
     format: PixelFormat,
     encoded: &[u8],
     expected_len: u64,
 ) -> Result<Vec<u8>, CodecError> {
-    let (min, max) = codec.encoded_len_range(expected_len);
+    decode_with(codec, format, encoded, expected_len, None)
+}
+
+/// [`decode`], with the frame's decoded `depth` for the codecs that predict
+/// from it.
+pub fn decode_with(
+    codec: Codec,
+    format: PixelFormat,
+    encoded: &[u8],
+    expected_len: u64,
+    depth: Option<&[f32]>,
+) -> Result<Vec<u8>, CodecError> {
+    let (min, max) = codec.encoded_len_range(format, expected_len);
     let len = encoded.len() as u64;
     if len < min || len > max {
         return Err(CodecError::EncodedLength { len, min, max });
@@ -127,17 +286,44 @@ pub fn decode(
             unit,
         });
     }
+    let bpp = format.bytes_per_pixel().max(1) as usize;
+    if !codec.is_lossless() && expected % bpp != 0 {
+        return Err(CodecError::Misaligned {
+            len: expected,
+            unit: bpp,
+        });
+    }
+    let pixels = expected / bpp;
     match codec {
         Codec::Raw => Ok(encoded.to_vec()),
-        Codec::Zstd => {
-            let planes = zstd::bulk::decompress(encoded, expected).map_err(CodecError::Zstd)?;
-            if planes.len() != expected {
+        Codec::Zstd => zstd_unpack(encoded, expected, unit),
+        Codec::QuantDepth => {
+            check_suits(codec, BufferKind::Depth, format)?;
+            let (values, _) = depth::decode(encoded, pixels)?;
+            Ok(values.iter().flat_map(|v| v.to_le_bytes()).collect())
+        }
+        Codec::MotionResidual => {
+            check_suits(codec, BufferKind::Motion, format)?;
+            let depth = depth.ok_or(CodecError::NeedsDepth)?;
+            if depth.len() != pixels {
                 return Err(CodecError::WrongLength {
-                    got: planes.len() as u64,
-                    expected: expected_len,
+                    got: depth.len() as u64,
+                    expected: pixels as u64,
                 });
             }
-            unshuffle(&planes, unit)
+            let motion = motion::decode(encoded, depth)?;
+            Ok(match format {
+                PixelFormat::Rg16Float => motion
+                    .iter()
+                    .flatten()
+                    .flat_map(|v| half::f16::from_f32(*v).to_le_bytes())
+                    .collect(),
+                _ => motion
+                    .iter()
+                    .flatten()
+                    .flat_map(|v| v.to_le_bytes())
+                    .collect(),
+            })
         }
     }
 }
