@@ -204,6 +204,11 @@ struct EvalArgs {
     /// Extra resolutions (the methods at their defaults) for the first scene, e.g. 640x360,960x540.
     #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(FrameSize))]
     resolutions: Vec<FrameSize>,
+    /// How the fed frames' depth and motion reach the generator:
+    /// `lossless` (as rendered) or `compact` (through the stream's
+    /// quantised codecs, encoded and decoded as `serve` and `connect` do).
+    #[arg(long, default_value = "lossless", value_parser = clap::value_parser!(protocol::wire::BufferSet))]
+    geometry: protocol::wire::BufferSet,
     /// Fed frames before scoring starts.
     #[arg(long, default_value_t = 2)]
     warmup: usize,
@@ -309,6 +314,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         backends: args.backends,
         resolutions: args.resolutions,
         only: args.only,
+        geometry: args.geometry,
         pass_clock: match args.pass_clock.as_str() {
             "wall" => Some(framegen::PassClock::Wall),
             "timestamps" => Some(framegen::PassClock::Timestamps),
@@ -610,7 +616,7 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             l.server.shutdown().await;
         }
         println!(
-            "method {} on {}: received {} frames, {} vsyncs missed; generation ms p50 {:.2} p99 {:.2}; ingest ms p50 {:.2} p99 {:.2}; history restarts {}",
+            "method {} on {}: received {} frames, {} vsyncs missed; generation ms p50 {:.2} p99 {:.2}; ingest ms p50 {:.2} p99 {:.2}; decode ms p50 {:.2} p99 {:.2}; history restarts {}",
             report.method,
             report.backend,
             report.received,
@@ -619,6 +625,8 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             report.generation_ms.p99,
             report.ingest_ms.p50,
             report.ingest_ms.p99,
+            report.decode_ms.p50,
+            report.decode_ms.p99,
             report.restarts,
         );
         println!("  plan: {}", report.plan);

@@ -107,6 +107,9 @@ pub struct Report {
     pub generation_ms: Percentiles,
     /// Push (upload + history + background) time per rendered frame, ms.
     pub ingest_ms: Percentiles,
+    /// Decode time per received frame (its codecs, off the async
+    /// runtime: last byte received → frame ready), ms.
+    pub decode_ms: Percentiles,
     /// Pushes that restarted the generator's history (the first frame,
     /// cuts, size changes; `framegen::PushOutcome::Restarted`).
     pub restarts: u64,
@@ -225,6 +228,7 @@ pub async fn run_headless(
     };
     let mut kept: VecDeque<Frame> = VecDeque::from([first]);
     let mut generation = Vec::new();
+    let mut decode_ms = Vec::new();
     // The passes of the last generated frame (ingest and generation).
     let mut passes = Vec::new();
     let (mut received, mut missed) = (1u64, 0u64);
@@ -254,6 +258,12 @@ pub async fn run_headless(
         }
         let since = |t: Instant| t.saturating_duration_since(start);
         for a in arrived {
+            decode_ms.push(
+                a.decoded
+                    .saturating_duration_since(a.received)
+                    .as_secs_f64()
+                    * 1e3,
+            );
             let frame = a.frame;
             scheduler.frame_ready(FrameReady {
                 id: frame.meta.index,
@@ -327,6 +337,7 @@ pub async fn run_headless(
         missed_vsyncs: missed,
         generation_ms: Percentiles::of(generation),
         ingest_ms: Percentiles::of(pusher.ingest_ms),
+        decode_ms: Percentiles::of(decode_ms),
         restarts: pusher.restarts,
         summary,
         outages: session.stats(),

@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use protocol::FrameSize;
 use protocol::dump::{DumpWriter, Manifest};
 use protocol::import::{AnyDump, Format};
-use protocol::wire::WindowMode;
+use protocol::wire::{BufferSet, WindowMode};
 use scene::render::{Renderer, WindowSettings, plan};
 use scene::{Scene, builtin};
 
@@ -117,8 +117,8 @@ Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
         /// How depth and motion travel: `compact` (depth quantised with a
         /// bounded error, motion as the residual over the camera) or
         /// `lossless` (zstd).
-        #[arg(long, value_enum, default_value_t = Geometry::Compact)]
-        geometry: Geometry,
+        #[arg(long, default_value = "compact", value_parser = clap::value_parser!(BufferSet))]
+        geometry: BufferSet,
         /// Most sessions at once; one more is refused as "server full".
         #[arg(long, default_value_t = host::session::DEFAULT_MAX_SESSIONS)]
         max_sessions: usize,
@@ -160,16 +160,6 @@ Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
         #[arg(long, value_enum, default_value_t = ImportFormat::Auto)]
         format: ImportFormat,
     },
-}
-
-/// `server serve --geometry`.
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
-enum Geometry {
-    /// Depth within 6·10⁻⁵ relative and 0.05 px of reprojection; motion
-    /// within 1/256 px (issue 19).
-    Compact,
-    /// Depth and motion exactly as rendered, zstd.
-    Lossless,
 }
 
 /// `server import --format`.
@@ -389,7 +379,7 @@ struct ServeArgs {
     token: Option<String>,
     window: WindowMode,
     color_codec: protocol::Codec,
-    geometry: Geometry,
+    geometry: BufferSet,
     max_sessions: usize,
     congestion: host::tls::Congestion,
 }
@@ -398,11 +388,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let identity = host::tls::Identity::load_or_create(&args.identity)?;
     let token = args.token.unwrap_or_else(host::session::random_token);
     anyhow::ensure!(!token.is_empty(), "--token must not be empty");
-    let buffers = match args.geometry {
-        Geometry::Compact => protocol::wire::StreamBuffer::compact_set(args.color_codec),
-        Geometry::Lossless => protocol::wire::StreamBuffer::default_set(args.color_codec),
-    }
-    .to_vec();
+    let buffers = args.geometry.buffers(args.color_codec).to_vec();
     let max_frame = host::session::max_frame(
         args.size,
         &WindowSettings {

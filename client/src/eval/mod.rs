@@ -25,6 +25,7 @@ pub mod report;
 pub mod save;
 pub mod sequence;
 pub mod timing;
+pub mod transport;
 pub mod variant;
 
 use std::collections::{HashMap, VecDeque};
@@ -89,6 +90,9 @@ pub struct EvalConfig {
     pub pass_clock: Option<framegen::PassClock>,
     /// Keep only variants whose label contains one of these (all if empty).
     pub only: Vec<String>,
+    /// How fed frames' depth and motion reach the generator: as rendered
+    /// (lossless), or through the stream's quantised codecs (compact).
+    pub geometry: protocol::wire::BufferSet,
     /// Fed frames before scoring starts (history and background warm up).
     pub warmup: usize,
     /// Heat maps for the first this many inputs...
@@ -318,6 +322,7 @@ fn run_group(
         .collect::<anyhow::Result<Vec<_>>>()?;
     let max_step = variants.iter().map(Variant::step).max().unwrap_or(1);
     let mut ring: VecDeque<Step> = VecDeque::with_capacity(2 * max_step);
+    let transport = transport::Transport::new(config.geometry);
     let mut heat: HashMap<usize, Vec<heatmap::Capture>> = HashMap::new();
     let mut r = 0usize;
     while let Some(step) = seq.next_step()? {
@@ -344,17 +349,23 @@ fn run_group(
                 continue;
             }
             let m = r + 1 - s;
-            let fed = kept
-                .entry(s)
-                .or_insert_with(|| {
+            let fed = match kept.get(&s) {
+                Some(fed) => fed.clone(),
+                None => {
                     let skipped: Vec<&Frame> = if m >= s {
                         (m + 1 - s..m).map(|k| at(k).fed.as_ref()).collect()
                     } else {
                         Vec::new()
                     };
-                    Arc::new(framegen::decimate::kept(&at(m).fed, &skipped, s))
-                })
-                .clone();
+                    let fed = framegen::decimate::kept(&at(m).fed, &skipped, s);
+                    // Through the stream's codecs, coded against the fed
+                    // frame before it, as a server at this rate sends it.
+                    let previous = (m >= s).then(|| &at(m - s).fed.meta);
+                    let fed = Arc::new(transport.carry(fed, previous)?);
+                    kept.insert(s, fed.clone());
+                    fed
+                }
+            };
             let scored = m / s >= config.warmup.max(1);
             // A method that holds frames back shows frames that far behind
             // the newest fed one (interpolation: the interval before it).

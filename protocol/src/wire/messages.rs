@@ -267,6 +267,44 @@ fn check_kinds(
     Ok(())
 }
 
+/// Which codecs a stream sends depth and motion with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BufferSet {
+    /// [`StreamBuffer::compact_set`]: depth quantised with a bounded error,
+    /// motion as the residual over the camera.
+    #[default]
+    Compact,
+    /// [`StreamBuffer::default_set`]: depth and motion exactly, zstd.
+    Lossless,
+}
+
+impl BufferSet {
+    /// The three buffers of the set, with `color` for colour.
+    pub fn buffers(self, color: Codec) -> [StreamBuffer; 3] {
+        match self {
+            BufferSet::Compact => StreamBuffer::compact_set(color),
+            BufferSet::Lossless => StreamBuffer::default_set(color),
+        }
+    }
+}
+
+/// A buffer set name other than `compact` or `lossless`.
+#[derive(Debug, thiserror::Error)]
+#[error("expected compact or lossless, not {0:?}")]
+pub struct UnknownBufferSet(String);
+
+impl std::str::FromStr for BufferSet {
+    type Err = UnknownBufferSet;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "compact" => Ok(BufferSet::Compact),
+            "lossless" => Ok(BufferSet::Lossless),
+            other => Err(UnknownBufferSet(other.to_string())),
+        }
+    }
+}
+
 impl StreamBuffer {
     /// The default buffer set: color as RGB f16 uncompressed (`color`
     /// codec chosen by the caller, since color codecs are pluggable), depth
