@@ -209,6 +209,10 @@ struct EvalArgs {
     /// quantised codecs, encoded and decoded as `serve` and `connect` do).
     #[arg(long, default_value = "lossless", value_parser = clap::value_parser!(protocol::wire::BufferSet))]
     geometry: protocol::wire::BufferSet,
+    /// Colour through H.264 at a bitrate, e.g. `h264@12` (4:2:0, Mbit/s at
+    /// the fed rate) or `h264-444@12`; `raw` feeds colour as rendered.
+    #[arg(long, default_value = "raw", value_parser = clap::value_parser!(video::ColorCodec))]
+    color_codec: video::ColorCodec,
     /// Fed frames before scoring starts.
     #[arg(long, default_value_t = 2)]
     warmup: usize,
@@ -315,6 +319,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         resolutions: args.resolutions,
         only: args.only,
         geometry: args.geometry,
+        color: args.color_codec.0,
         pass_clock: match args.pass_clock.as_str() {
             "wall" => Some(framegen::PassClock::Wall),
             "timestamps" => Some(framegen::PassClock::Timestamps),

@@ -23,6 +23,7 @@ fn config(inputs: Vec<Input>, out: &std::path::Path) -> EvalConfig {
         resolutions: vec![],
         only: vec![],
         geometry: protocol::wire::BufferSet::Lossless,
+        color: None,
         pass_clock: None,
         warmup: 2,
         heatmap_inputs: 1,
@@ -326,6 +327,56 @@ fn the_compact_stream_scores_as_the_rendered_frames() {
         let (qa, qb) = (&a.quality, &b.quality);
         assert!(
             (qa.flip - qb.flip).abs() <= 0.002 && (qa.psnr - qb.psnr).abs() <= 0.3,
+            "{}: {qa:?} vs {qb:?}",
+            a.label
+        );
+    }
+}
+
+/// Colour through H.264 (issue 19 §1) at a bitrate generous for the size:
+/// the report states each fed rate's stream (Mbit/s per buffer, colour
+/// PSNR, codec times), near its target bitrate, and the generator's output
+/// scores close to the frames as rendered.
+#[test]
+fn colour_through_h264_is_reported_and_scores_close_to_raw() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_with = |color: &str, name: &str| {
+        let mut c = config(
+            vec![Input::Scene("builtin:crossing".into())],
+            &dir.path().join(name),
+        );
+        c.geometry = protocol::wire::BufferSet::Compact;
+        c.color = color.parse::<video::ColorCodec>().unwrap().0;
+        c.backends = vec![BackendKind::Cpu];
+        c.only = vec!["gffe".into(), "interp".into()];
+        c.heatmap_inputs = 0;
+        run(&c).unwrap()
+    };
+    let raw = run_with("raw", "raw");
+    let coded = run_with("h264@1", "h264");
+    let stream = &coded.scenes[0].stream;
+    // gffe is fed every other displayed frame (30 fps), interp too.
+    assert_eq!(stream.len(), 1, "{stream:?}");
+    let s = &stream[0];
+    assert_eq!((s.step, s.fps, s.color_codec.as_str()), (2, 30.0, "h264@1"));
+    let color = s.mbit["color"];
+    assert!(color > 0.1 && color < 1.5, "colour at {color} Mbit/s for 1");
+    assert!(s.mbit["depth"] > 0.0 && s.mbit["motion"] > 0.0);
+    let (mean, worst) = s.color_psnr.unwrap();
+    assert!(
+        worst > 30.0 && mean >= worst,
+        "colour PSNR {mean} ({worst})"
+    );
+    assert!(s.color_ms.is_some_and(|(e, d)| e > 0.0 && d > 0.0));
+    assert!(s.color_flip.is_some_and(|f| f > 0.0 && f < 0.1), "{s:?}");
+    assert!(raw.scenes[0].stream[0].color_psnr.is_none());
+    let md = std::fs::read_to_string(dir.path().join("h264/report.md")).unwrap();
+    assert!(md.contains("## Stream codecs"), "{md}");
+    for (a, b) in raw.scenes[0].rows.iter().zip(&coded.scenes[0].rows) {
+        assert_eq!(a.label, b.label);
+        let (qa, qb) = (&a.quality, &b.quality);
+        assert!(
+            (qa.flip - qb.flip).abs() <= 0.02 && qb.flip.is_finite(),
             "{}: {qa:?} vs {qb:?}",
             a.label
         );

@@ -172,9 +172,11 @@ pub fn encode_frame_after(
         .iter()
         .any(|b| b.kind == BufferKind::Depth && b.codec == Codec::QuantDepth);
     let codes = lossy_depth.then(|| quantizer.codes(&frame.depth));
+    // Only a motion residual needs it: skip the round trip otherwise.
+    let residual = buffers.iter().any(|b| b.codec == Codec::MotionResidual);
     let seen_depth: Cow<[f32]> = match &codes {
-        Some(codes) => Cow::Owned(quantizer.depths(codes)),
-        None => Cow::Borrowed(&frame.depth),
+        Some(codes) if residual => Cow::Owned(quantizer.depths(codes)),
+        _ => Cow::Borrowed(&frame.depth),
     };
     let mut descs = Vec::with_capacity(buffers.len());
     let mut payloads = Vec::with_capacity(buffers.len());

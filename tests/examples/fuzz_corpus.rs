@@ -90,6 +90,20 @@ fn main() -> anyhow::Result<()> {
             }
         }
     }
+    // The video target: its first byte picks 64×32 (see
+    // `fuzz/fuzz_targets/video.rs`); a keyframe, then two predicted frames
+    // of a moving camera, split by its separator.
+    let size = FrameSize::new(64, 32);
+    let mut encoder = video::ColorEncoder::new("h264@0.5".parse()?, 30.0)?;
+    let mut seed = vec![3 | 1 << 3];
+    for i in 0..3 {
+        let frame = tests::render(i, 30.0, DVec3::ZERO, size);
+        if i > 0 {
+            seed.extend_from_slice(&[0xFF, 0xFE, 0xFD]);
+        }
+        seed.extend(encoder.encode(size.width, size.height, &frame.color)?);
+    }
+    write(&out.join("video"), "three-frames", &seed)?;
     let streams = frames
         .iter()
         .map(|f| {

@@ -93,6 +93,8 @@ pub struct EvalConfig {
     /// How fed frames' depth and motion reach the generator: as rendered
     /// (lossless), or through the stream's quantised codecs (compact).
     pub geometry: protocol::wire::BufferSet,
+    /// Colour through H.264 at this setting (issue 19 §1), or as rendered.
+    pub color: Option<video::VideoSettings>,
     /// Fed frames before scoring starts (history and background warm up).
     pub warmup: usize,
     /// Heat maps for the first this many inputs...
@@ -155,6 +157,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         }
         let name = input.name();
         let mut rows = Vec::new();
+        let mut stream = Vec::new();
         let group_count = groups.len();
         for (g, ((gsize, window), vs)) in groups.into_iter().enumerate() {
             if !sizes.contains(&gsize) {
@@ -198,6 +201,9 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
             )?;
             bar.finish_and_clear();
             rows.extend(out.rows);
+            if window == WindowMode::Off && gsize == size {
+                stream.extend(out.stream);
+            }
             for (truth_index, captures) in out.heat {
                 let file = heatmap::write(
                     &config.out,
@@ -211,7 +217,11 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         // Report order: the sweep's.
         rows.sort_by_key(|r: &Row| variants.iter().position(|v| v.label == r.label));
         tracing::info!("{name}: {} variants", rows.len());
-        scenes.push(SceneReport { scene: name, rows });
+        scenes.push(SceneReport {
+            scene: name,
+            rows,
+            stream,
+        });
     }
     let copy_floor = sizes
         .iter()
@@ -265,6 +275,8 @@ struct Run<'a> {
 /// What one pass over a sequence produced.
 struct GroupOutput {
     rows: Vec<Row>,
+    /// What the fed frames' streams cost (when they are coded).
+    stream: Vec<transport::StreamCost>,
     /// Per heat-map truth frame: (label, generated image, truth image, ꟻLIP map).
     heat: Vec<(usize, Vec<heatmap::Capture>)>,
 }
@@ -322,7 +334,7 @@ fn run_group(
         .collect::<anyhow::Result<Vec<_>>>()?;
     let max_step = variants.iter().map(Variant::step).max().unwrap_or(1);
     let mut ring: VecDeque<Step> = VecDeque::with_capacity(2 * max_step);
-    let transport = transport::Transport::new(config.geometry);
+    let mut transport = transport::Transport::new(config.geometry, config.color, seq.fps());
     let mut heat: HashMap<usize, Vec<heatmap::Capture>> = HashMap::new();
     let mut r = 0usize;
     while let Some(step) = seq.next_step()? {
@@ -361,7 +373,7 @@ fn run_group(
                     // Through the stream's codecs, coded against the fed
                     // frame before it, as a server at this rate sends it.
                     let previous = (m >= s).then(|| &at(m - s).fed.meta);
-                    let fed = Arc::new(transport.carry(fed, previous)?);
+                    let fed = Arc::new(transport.carry(fed, previous, s)?);
                     kept.insert(s, fed.clone());
                     fed
                 }
@@ -514,7 +526,11 @@ fn run_group(
         .collect();
     let mut heat: Vec<_> = heat.into_iter().collect();
     heat.sort_by_key(|(k, _)| *k);
-    Ok(GroupOutput { rows, heat })
+    Ok(GroupOutput {
+        rows,
+        stream: transport.costs(),
+        heat,
+    })
 }
 
 #[cfg(test)]

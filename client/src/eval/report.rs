@@ -63,6 +63,9 @@ pub struct SceneReport {
     pub scene: String,
     /// One per variant, in sweep order.
     pub rows: Vec<Row>,
+    /// What the fed frames' streams cost, per fed rate (empty when frames
+    /// are fed as rendered).
+    pub stream: Vec<super::transport::StreamCost>,
 }
 
 /// One variant's numbers.
@@ -266,6 +269,53 @@ impl Report {
     }
 
     /// The Markdown report.
+    /// The streams' costs, when fed frames went through the stream's codecs
+    /// (`--geometry compact`, `--color-codec`).
+    fn streams(&self, md: &mut String) {
+        if self.scenes.iter().all(|s| s.stream.is_empty()) {
+            return;
+        }
+        let _ = writeln!(md, "\n## Stream codecs\n");
+        let _ = writeln!(
+            md,
+            "Fed frames went through the stream's codecs before the generator saw them; one stream per fed rate. \
+             Mbit/s per buffer at the stream's rate; colour PSNR is the decoded against the rendered in display \
+             space (mean, worst frame), and its ꟻLIP; encode and decode are medians over all buffers, of which the colour \
+             codec's in parentheses.\n"
+        );
+        let _ = writeln!(
+            md,
+            "| scene | fps | colour | colour Mbit/s | depth Mbit/s | motion Mbit/s | total Mbit/s | colour PSNR dB | colour ꟻLIP | encode ms | decode ms |"
+        );
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
+        for scene in &self.scenes {
+            for c in &scene.stream {
+                let mbit = |k: &str| c.mbit.get(k).map_or("—".into(), |v| format!("{v:.2}"));
+                let _ = writeln!(
+                    md,
+                    "| {} | {:.1} | {} | {} | {} | {} | {:.2} | {} | {} | {:.2}{} | {:.2}{} |",
+                    scene.scene,
+                    c.fps,
+                    c.color_codec,
+                    mbit("color"),
+                    mbit("depth"),
+                    mbit("motion"),
+                    c.total_mbit,
+                    c.color_psnr.map_or("—".into(), |(mean, worst)| format!(
+                        "{mean:.2} ({worst:.2})"
+                    )),
+                    c.color_flip.map_or("—".into(), |f| format!("{f:.4}")),
+                    c.encode_ms,
+                    c.color_ms
+                        .map_or(String::new(), |(e, _)| format!(" ({e:.2})")),
+                    c.decode_ms,
+                    c.color_ms
+                        .map_or(String::new(), |(_, d)| format!(" ({d:.2})")),
+                );
+            }
+        }
+    }
+
     pub fn markdown(&self) -> String {
         let mut md = String::new();
         let _ = writeln!(md, "# Frame generation: accuracy against time\n");
@@ -328,6 +378,7 @@ impl Report {
         }
         self.summary(&mut md);
         self.plans(&mut md);
+        self.streams(&mut md);
         for scene in &self.scenes {
             self.scene_section(&mut md, scene);
         }

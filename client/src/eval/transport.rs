@@ -1,39 +1,230 @@
-//! What the stream does to a fed frame before the generator sees it: with
-//! [`BufferSet::Compact`], depth and motion are quantised by the stream's
-//! codecs (issue 19), so `eval --geometry compact` encodes and decodes
-//! every fed frame as `serve` and `connect` do, coded against the fed frame
-//! before it (the previous frame a server at the fed rate would send).
-//! Colour stays as rendered (raw f16).
+//! What the stream does to a fed frame before the generator sees it (issue
+//! 19): with [`BufferSet::Compact`], depth and motion are quantised by the
+//! stream's codecs, coded against the fed frame before it (the previous
+//! frame a server at the fed rate would send); with a colour codec
+//! (`eval --color-codec h264@12`), colour goes through libx264 and FFmpeg's
+//! decoder, one encoder per fed rate, as a stream at that rate would.
+//! Without either, frames pass as rendered.
+//!
+//! Each fed rate's stream keeps its costs: bytes per buffer (Mbit/s at the
+//! fed rate), the decoded colour's display-space PSNR against the rendered,
+//! and encode and decode wall time.
 
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use half::f16;
 use protocol::assemble::encode_frame_after;
 use protocol::codec::DEFAULT_ZSTD_LEVEL;
 use protocol::wire::{BufferSet, StreamBuffer};
-use protocol::{Codec, Frame, FrameMeta};
+use protocol::{BufferKind, Codec, Frame, FrameMeta};
+use serde::Serialize;
+use video::transfer::display_psnr;
+use video::{ColorDecoder, ColorEncoder, VideoSettings};
 
 /// The stream's codecs between the renderer and the generator.
 pub struct Transport {
-    /// The buffers to code fed frames with; `None` when they are lossless.
-    buffers: Option<[StreamBuffer; 3]>,
+    buffers: [StreamBuffer; 3],
+    /// Whether frames are coded at all.
+    coded: bool,
+    color: Option<VideoSettings>,
+    /// Display rate; a stream fed every `step`th frame runs at `fps / step`.
+    fps: f64,
+    streams: BTreeMap<usize, Stream>,
+}
+
+/// One fed rate's codec state and tallies.
+struct Stream {
+    color: Option<(ColorEncoder, ColorDecoder)>,
+    decoded: Vec<[f16; 4]>,
+    frames: u64,
+    bytes: BTreeMap<&'static str, u64>,
+    psnr_sum: f64,
+    psnr_min: f64,
+    flip_sum: f64,
+    encode: Vec<Duration>,
+    decode: Vec<Duration>,
+    color_encode: Vec<Duration>,
+    color_decode: Vec<Duration>,
+}
+
+/// What one fed rate's stream cost (`report.json`'s `scenes[].stream`).
+#[derive(Clone, Debug, Serialize)]
+pub struct StreamCost {
+    /// Frames per second of the stream (the display rate / the step).
+    pub fps: f64,
+    /// Every how many displayed frames one is fed.
+    pub step: usize,
+    /// Frames coded.
+    pub frames: u64,
+    /// The colour codec (`raw` when colour is not video-coded).
+    pub color_codec: String,
+    /// Mbit/s of each buffer at the stream's rate (`color`, `depth`, `motion`).
+    pub mbit: BTreeMap<&'static str, f64>,
+    /// All buffers together.
+    pub total_mbit: f64,
+    /// Decoded colour against the rendered, display space: mean and worst
+    /// frame (dB); `None` when colour is not video-coded.
+    pub color_psnr: Option<(f64, f64)>,
+    /// Mean ꟻLIP of the decoded colour against the rendered.
+    pub color_flip: Option<f64>,
+    /// Median wall time to encode a frame (all buffers; colour is also
+    /// copied raw when it is video-coded), ms.
+    pub encode_ms: f64,
+    /// Median wall time to decode one, ms.
+    pub decode_ms: f64,
+    /// Of which the colour codec: median encode and decode ms.
+    pub color_ms: Option<(f64, f64)>,
+}
+
+fn kind_name(kind: BufferKind) -> &'static str {
+    match kind {
+        BufferKind::Color => "color",
+        BufferKind::Depth => "depth",
+        BufferKind::Motion => "motion",
+        _ => "extra",
+    }
+}
+
+fn median_ms(v: &[Duration]) -> f64 {
+    let mut ms: Vec<f64> = v.iter().map(|d| d.as_secs_f64() * 1e3).collect();
+    ms.sort_by(f64::total_cmp);
+    ms.get(ms.len() / 2).copied().unwrap_or(0.0)
 }
 
 impl Transport {
-    /// Fed frames through `set`'s codecs.
-    pub fn new(set: BufferSet) -> Self {
+    /// Fed frames through `set`'s depth and motion codecs and, with
+    /// `color`, colour through H.264 at that setting; `fps` is the display
+    /// rate.
+    pub fn new(set: BufferSet, color: Option<VideoSettings>, fps: f64) -> Self {
         Self {
-            buffers: match set {
-                BufferSet::Compact => Some(set.buffers(Codec::Raw)),
-                BufferSet::Lossless => None,
-            },
+            buffers: set.buffers(Codec::Raw),
+            coded: set == BufferSet::Compact || color.is_some(),
+            color,
+            fps,
+            streams: BTreeMap::new(),
         }
     }
 
-    /// `frame` as a client decodes it, when `previous` was the frame sent
-    /// before it.
-    pub fn carry(&self, frame: Frame, previous: Option<&FrameMeta>) -> anyhow::Result<Frame> {
-        let Some(buffers) = &self.buffers else {
+    /// `frame` as a client decodes it, when it is fed every `step`th
+    /// displayed frame and `previous` was the frame sent before it.
+    pub fn carry(
+        &mut self,
+        mut frame: Frame,
+        previous: Option<&FrameMeta>,
+        step: usize,
+    ) -> anyhow::Result<Frame> {
+        if !self.coded {
             return Ok(frame);
+        }
+        let fps = self.fps / step.max(1) as f64;
+        let stream = match self.streams.entry(step) {
+            std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::btree_map::Entry::Vacant(e) => e.insert(Stream {
+                color: match self.color {
+                    Some(s) => Some((ColorEncoder::new(s, fps)?, ColorDecoder::new()?)),
+                    None => None,
+                },
+                decoded: Vec::new(),
+                frames: 0,
+                bytes: BTreeMap::new(),
+                psnr_sum: 0.0,
+                psnr_min: f64::INFINITY,
+                flip_sum: 0.0,
+                encode: Vec::new(),
+                decode: Vec::new(),
+                color_encode: Vec::new(),
+                color_decode: Vec::new(),
+            }),
         };
-        let encoded = encode_frame_after(&frame, previous, buffers, DEFAULT_ZSTD_LEVEL)?;
-        Ok(encoded.decode()?)
+        let started = Instant::now();
+        let encoded = encode_frame_after(&frame, previous, &self.buffers, DEFAULT_ZSTD_LEVEL)?;
+        let color_payload = match &mut stream.color {
+            Some((encoder, _)) => {
+                let size = frame.meta.size;
+                let started = Instant::now();
+                let payload = encoder.encode(size.width, size.height, &frame.color)?;
+                stream.color_encode.push(started.elapsed());
+                Some(payload)
+            }
+            None => None,
+        };
+        stream.encode.push(started.elapsed());
+        let started = Instant::now();
+        let mut decoded = encoded.decode()?;
+        if let (Some((_, decoder)), Some(payload)) = (&mut stream.color, &color_payload) {
+            let size = frame.meta.size;
+            let started = Instant::now();
+            decoder.decode(payload, size.width, size.height, &mut stream.decoded)?;
+            stream.color_decode.push(started.elapsed());
+            decoded.color.clone_from(&stream.decoded);
+        }
+        stream.decode.push(started.elapsed());
+        stream.frames += 1;
+        for (desc, payload) in encoded.header.buffers.iter().zip(&encoded.payloads) {
+            let len = match (desc.kind, &color_payload) {
+                (BufferKind::Color, Some(p)) => p.len(),
+                _ => payload.data.len(),
+            };
+            *stream.bytes.entry(kind_name(desc.kind)).or_default() += len as u64;
+        }
+        if color_payload.is_some() {
+            let q = display_psnr(&frame.color, &decoded.color);
+            stream.psnr_sum += q;
+            stream.psnr_min = stream.psnr_min.min(q);
+            let size = frame.meta.size;
+            let display = |c: &[[f16; 4]]| {
+                protocol::display::display_encode(size.width, size.height, c)
+                    .ok_or_else(|| anyhow::anyhow!("colour of the wrong size"))
+            };
+            let flip = super::measure::flip_map(&display(&frame.color)?, &display(&decoded.color)?);
+            let values = flip.to_vec();
+            stream.flip_sum +=
+                values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64;
+        }
+        // The generator sees the decoded frame, with the rendered metadata
+        // (host timings and all).
+        std::mem::swap(&mut frame.color, &mut decoded.color);
+        frame.depth = decoded.depth;
+        frame.motion = decoded.motion;
+        Ok(frame)
+    }
+
+    /// What each fed rate's stream cost so far, slowest rate first.
+    pub fn costs(&self) -> Vec<StreamCost> {
+        self.streams
+            .iter()
+            .rev()
+            .filter(|(_, s)| s.frames > 0)
+            .map(|(&step, s)| {
+                let fps = self.fps / step.max(1) as f64;
+                let mbit: BTreeMap<&'static str, f64> = s
+                    .bytes
+                    .iter()
+                    .map(|(&k, &b)| (k, b as f64 * 8.0 * fps / s.frames as f64 / 1e6))
+                    .collect();
+                StreamCost {
+                    fps,
+                    step,
+                    frames: s.frames,
+                    color_codec: self
+                        .color
+                        .map_or_else(|| "raw".to_owned(), |c| c.to_string()),
+                    total_mbit: mbit.values().sum(),
+                    mbit,
+                    color_psnr: s
+                        .color
+                        .as_ref()
+                        .map(|_| (s.psnr_sum / s.frames as f64, s.psnr_min)),
+                    color_flip: s.color.as_ref().map(|_| s.flip_sum / s.frames as f64),
+                    encode_ms: median_ms(&s.encode),
+                    decode_ms: median_ms(&s.decode),
+                    color_ms: s
+                        .color
+                        .as_ref()
+                        .map(|_| (median_ms(&s.color_encode), median_ms(&s.color_decode))),
+                }
+            })
+            .collect()
     }
 }
