@@ -9,10 +9,12 @@
 #   the window presenter's test runs under a virtual X server; the overlay
 #   and the eval plots draw text.
 # - g++: nv-flip (the ꟻLIP metric) builds NVIDIA's C++ FLIP.
-# - libavcodec-dev, libavformat-dev (FFmpeg 5.1 with libx264), libclang-dev,
-#   pkg-config: the `video` crate codes colour as H.264 through ffmpeg-next,
-#   whose bindings bindgen generates from the installed headers.
-packages="mesa-vulkan-drivers libvulkan1 xvfb xauth libx11-6 libxcursor1 libxrandr2 libxi6 libxkbcommon-x11-0 fonts-dejavu-core g++ libavcodec-dev libavformat-dev libclang-dev pkg-config"
+# - libavcodec-dev, libavformat-dev (FFmpeg 5.1 with libx264), clang,
+#   libclang-dev, pkg-config: the `video` crate codes colour as H.264
+#   through ffmpeg-next, whose bindings bindgen generates from the installed
+#   headers (ffmpeg-next's build instructions list clang beside
+#   libclang-dev; the build CI verified had both).
+packages="mesa-vulkan-drivers libvulkan1 xvfb xauth libx11-6 libxcursor1 libxrandr2 libxi6 libxkbcommon-x11-0 fonts-dejavu-core g++ libavcodec-dev libavformat-dev clang libclang-dev pkg-config"
 # shellcheck disable=SC2086
 if ! dpkg -s $packages >/dev/null 2>&1; then
   if [ "$(id -u)" = 0 ]; then
