@@ -9,9 +9,10 @@ use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use protocol::assemble::AssembleError;
 use protocol::wire::{
-    self, ClientStats, Decoder, Hello, Message, Ping, Reject, ServerStats, WIRE_VERSION, Welcome,
-    WindowMode,
+    self, ClientStats, Decoder, Hello, KeyframeRequest, Message, Ping, Reject, ServerStats,
+    WIRE_VERSION, Welcome, WindowMode,
 };
 use protocol::{Codec, Frame, FrameSize, Limits};
 use tokio::sync::mpsc;
@@ -95,6 +96,14 @@ pub struct SessionStats {
     pub server: Option<ServerStats>,
     /// Frame streams that broke the protocol (each also closes the session).
     pub stream_errors: u64,
+    /// Frames whose video-coded colour could not be decoded (corrupt, or
+    /// predicted from a frame this client lost): each dropped, the stream
+    /// goes on from the next keyframe.
+    pub color_errors: u64,
+    /// Keyframes asked of the server.
+    pub keyframe_requests: u64,
+    /// Index of the newest frame decoded.
+    pub last_decoded: Option<u64>,
 }
 
 /// A complete, decoded frame and when it got there.
@@ -193,12 +202,7 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
         version: config.version,
         client_name: config.client_name.clone(),
         token: config.token.clone(),
-        codecs: vec![
-            Codec::Raw,
-            Codec::Zstd,
-            Codec::QuantDepth,
-            Codec::MotionResidual,
-        ],
+        codecs: decodable_codecs(),
         max_size: FrameSize::new(config.limits.max_dimension, config.limits.max_dimension),
         window_modes: vec![WindowMode::KeepDensity, WindowMode::KeepSize],
         extras: vec![],
@@ -250,18 +254,27 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
     let (chunks_tx, chunks_rx) = mpsc::channel::<StreamEvent>(256);
     let cancelled = Arc::new(Mutex::new(HashSet::new()));
     let failure = Arc::new(Mutex::new(None));
+    let keyframe = Arc::new(tokio::sync::Notify::new());
     let tasks = vec![
         tokio::spawn(accept_streams(conn.clone(), chunks_tx, cancelled.clone())),
         tokio::spawn(assemble(
-            conn.clone(),
+            Shared {
+                conn: conn.clone(),
+                cancelled,
+                stats: stats.clone(),
+                failure: failure.clone(),
+                keyframe: keyframe.clone(),
+            },
             receiver,
             chunks_rx,
             frames_tx,
-            cancelled,
-            stats.clone(),
-            failure.clone(),
         )),
-        tokio::spawn(control(conn.clone(), send, recv, decoder, stats.clone())),
+        tokio::spawn(control(
+            conn.clone(),
+            (send, recv, decoder),
+            stats.clone(),
+            keyframe,
+        )),
     ];
     Ok(Session {
         welcome,
@@ -272,6 +285,16 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
         failure,
         tasks,
     })
+}
+
+/// The codecs this client decodes: all of protocol's, H.264 only where
+/// libavcodec has its decoder (without it, a server sending video-coded
+/// colour refuses the hello and says why).
+fn decodable_codecs() -> Vec<Codec> {
+    Codec::ALL
+        .into_iter()
+        .filter(|&c| c != Codec::H264 || video::ColorDecoder::new().is_ok())
+        .collect()
 }
 
 async fn read_message(
@@ -362,16 +385,36 @@ fn cancel(set: &mut HashSet<StreamId>, ids: &[StreamId]) {
     }
 }
 
-/// Owns the [`FrameReceiver`]: reassembles, orders, decodes, delivers.
-async fn assemble(
+/// What the frame tasks share with the session.
+struct Shared {
     conn: quinn::Connection,
-    mut receiver: FrameReceiver,
-    mut rx: mpsc::Receiver<StreamEvent>,
-    frames: mpsc::Sender<Arrived>,
     cancelled: Arc<Mutex<HashSet<StreamId>>>,
     stats: Arc<Mutex<SessionStats>>,
     failure: Arc<Mutex<Option<String>>>,
+    /// Wakes the control task to ask for a keyframe.
+    keyframe: Arc<tokio::sync::Notify>,
+}
+
+/// How long a client that waits for a keyframe waits before asking again.
+const KEYFRAME_RETRY: Duration = Duration::from_millis(250);
+
+/// Owns the [`FrameReceiver`] and the colour decoder: reassembles, orders,
+/// decodes, delivers. A frame whose video-coded colour cannot be decoded is
+/// dropped and counted, and a keyframe is asked for; any other broken
+/// frame ends the session.
+async fn assemble(
+    shared: Shared,
+    mut receiver: FrameReceiver,
+    mut rx: mpsc::Receiver<StreamEvent>,
+    frames: mpsc::Sender<Arrived>,
 ) {
+    let Shared {
+        conn,
+        cancelled,
+        stats,
+        failure,
+        keyframe,
+    } = shared;
     let fail = |e: ReceiveError| {
         let reason = e.to_string();
         tracing::warn!("closing: {reason}");
@@ -388,6 +431,10 @@ async fn assemble(
         }
         fail(e);
     };
+    // Made when the first frame needs it; frames are decoded one at a
+    // time, in the order they are delivered.
+    let mut color: Option<video::ColorDecoder> = None;
+    let mut asked: Option<Instant> = None;
     while let Some(event) = rx.recv().await {
         let delivery = match event {
             StreamEvent::Data(id, bytes) => match receiver.on_data(id, &bytes) {
@@ -417,32 +464,86 @@ async fn assemble(
                 cancel(&mut c, &delivery.cancel);
             }
         }
-        if let Some(encoded) = delivery.frame {
-            let received = Instant::now();
-            // Decompression takes milliseconds per frame: off the runtime.
-            let decoded = tokio::task::spawn_blocking(move || encoded.decode()).await;
-            let Ok(decoded) = decoded else {
-                // The runtime is shutting down.
-                return;
-            };
-            match decoded {
-                Ok(frame) => {
-                    let arrived = Arrived {
-                        frame,
-                        received,
-                        decoded: Instant::now(),
-                    };
-                    if frames.send(arrived).await.is_err() {
-                        return;
-                    }
-                }
+        let Some(encoded) = delivery.frame else {
+            continue;
+        };
+        let received = Instant::now();
+        let video = encoded
+            .header
+            .buffers
+            .iter()
+            .any(|b| b.codec == Codec::H264);
+        if video && color.is_none() {
+            match video::ColorDecoder::new() {
+                Ok(d) => color = Some(d),
                 Err(e) => {
-                    fail(ReceiveError::Stream {
+                    // The hello did not list H.264 then: the server broke
+                    // the agreement.
+                    return fail(ReceiveError::Stream {
                         stream: 0,
-                        source: e,
+                        source: AssembleError::Codec {
+                            kind: protocol::BufferKind::Color,
+                            source: protocol::codec::CodecError::Stream {
+                                codec: Codec::H264,
+                                source: Box::new(e),
+                            },
+                        },
                     });
+                }
+            }
+        }
+        // Decoding takes milliseconds per frame: off the runtime, the
+        // decoder going with the frame and coming back.
+        let mut decoder = color.take();
+        let decoded = tokio::task::spawn_blocking(move || {
+            let frame = encoded.decode_with(
+                decoder
+                    .as_mut()
+                    .map(|d| d as &mut dyn protocol::codec::stream::ColorStreamDecoder),
+            );
+            (decoder, frame)
+        })
+        .await;
+        let Ok((decoder, decoded)) = decoded else {
+            // The runtime is shutting down.
+            return;
+        };
+        color = decoder;
+        match decoded {
+            Ok(frame) => {
+                if let Ok(mut s) = stats.lock() {
+                    s.last_decoded = Some(frame.meta.index);
+                }
+                let arrived = Arrived {
+                    frame,
+                    received,
+                    decoded: Instant::now(),
+                };
+                if frames.send(arrived).await.is_err() {
                     return;
                 }
+            }
+            Err(AssembleError::Codec {
+                kind: protocol::BufferKind::Color,
+                source: protocol::codec::CodecError::Stream { source, .. },
+            }) => {
+                // This frame is lost; the stream goes on from a keyframe.
+                tracing::debug!("colour of a frame not decoded: {source}");
+                let ask = asked.is_none_or(|at| at.elapsed() >= KEYFRAME_RETRY);
+                if let Ok(mut s) = stats.lock() {
+                    s.color_errors += 1;
+                    s.keyframe_requests += u64::from(ask);
+                }
+                if ask {
+                    asked = Some(Instant::now());
+                    keyframe.notify_one();
+                }
+            }
+            Err(e) => {
+                return fail(ReceiveError::Stream {
+                    stream: 0,
+                    source: e,
+                });
             }
         }
     }
@@ -451,10 +552,9 @@ async fn assemble(
 /// Reports stats and pings every second; reads the server's stats.
 async fn control(
     conn: quinn::Connection,
-    mut send: quinn::SendStream,
-    mut recv: quinn::RecvStream,
-    mut decoder: Decoder,
+    (mut send, mut recv, mut decoder): (quinn::SendStream, quinn::RecvStream, Decoder),
     stats: Arc<Mutex<SessionStats>>,
+    keyframe: Arc<tokio::sync::Notify>,
 ) {
     let reader = {
         let stats = stats.clone();
@@ -473,7 +573,21 @@ async fn control(
         let mut tick = tokio::time::interval(Duration::from_secs(1));
         let mut seq = 0;
         loop {
-            tick.tick().await;
+            tokio::select! {
+                _ = tick.tick() => {}
+                () = keyframe.notified() => {
+                    let last_decoded = stats.lock().ok().and_then(|s| s.last_decoded);
+                    tracing::debug!(?last_decoded, "asking for a keyframe");
+                    let request = Message::KeyframeRequest(KeyframeRequest { last_decoded });
+                    let Ok(bytes) = wire::encode(&request) else {
+                        return;
+                    };
+                    if send.write_all(&bytes).await.is_err() {
+                        return;
+                    }
+                    continue;
+                }
+            }
             seq += 1;
             let ping = Message::Ping(Ping {
                 seq,

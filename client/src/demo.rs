@@ -8,11 +8,10 @@ use std::sync::Arc;
 
 use host::serve::Server;
 use host::session::Policy;
-use host::source::{Feed, Source, SourceSpec};
+use host::source::{Encoding, Feed, Source, SourceSpec};
 use host::tls::{Congestion, Identity};
-use protocol::Codec;
 use protocol::FrameSize;
-use protocol::wire::{StreamBuffer, WindowMode};
+use protocol::wire::{BufferSet, WindowMode};
 use scene::render::WindowSettings;
 
 use crate::{ConnectConfig, Pin, Stream};
@@ -31,19 +30,40 @@ pub struct LocalServer {
     _identity_dir: tempfile::TempDir,
 }
 
+/// How the in-process server sends: congestion control and colour codec
+/// (as `server serve --congestion --color-codec`; depth and motion go as
+/// the compact set).
+#[derive(Clone, Copy, Debug)]
+pub struct Link {
+    /// Congestion control of the frames.
+    pub congestion: Congestion,
+    /// The colour codec.
+    pub color: video::ColorCodec,
+}
+
+impl Default for Link {
+    /// Cubic, and colour through H.264 at the automatic rate.
+    fn default() -> Self {
+        Self {
+            congestion: Congestion::default(),
+            color: video::ColorCodec::DEFAULT_LIVE,
+        }
+    }
+}
+
 /// Starts a server on 127.0.0.1 (a free port) rendering `scene` live at
-/// `size` and `fps`, its frames sent under `congestion` control.
+/// `size` and `fps`, its frames sent over `link`.
 pub fn start_local(
     scene: &str,
     size: FrameSize,
     fps: f64,
-    congestion: Congestion,
+    link: Link,
 ) -> anyhow::Result<LocalServer> {
     start_local_from(
         scene_spec(scene, size, fps, WindowSettings::default()),
         (size, fps),
         WindowSettings::default(),
-        congestion,
+        link,
     )
 }
 
@@ -72,17 +92,14 @@ pub fn start_local_windowed(
         scene_spec(scene, size, fps, window),
         (size, fps),
         window,
-        Congestion::default(),
+        Link::default(),
     )
 }
 
 /// Starts a server on 127.0.0.1 replaying the dump in `dir` (looped, as one
 /// live stream) at its own size and rate: a native dump, a Blender render or
 /// an Unreal capture.
-pub fn start_local_dump(
-    dir: &std::path::Path,
-    congestion: Congestion,
-) -> anyhow::Result<LocalServer> {
+pub fn start_local_dump(dir: &std::path::Path, link: Link) -> anyhow::Result<LocalServer> {
     let dump = protocol::import::AnyDump::open(dir)?;
     start_local_from(
         SourceSpec::Dump {
@@ -91,7 +108,7 @@ pub fn start_local_dump(
         },
         (dump.size(), dump.fps()),
         WindowSettings::default(),
-        congestion,
+        link,
     )
 }
 
@@ -99,12 +116,13 @@ fn start_local_from(
     spec: SourceSpec,
     (size, fps): (FrameSize, f64),
     window: WindowSettings,
-    congestion: Congestion,
+    link: Link,
 ) -> anyhow::Result<LocalServer> {
     let identity_dir = tempfile::tempdir()?;
     let identity = Identity::load_or_create(identity_dir.path())?;
     let token = host::session::random_token();
-    let buffers = StreamBuffer::compact_set(Codec::Zstd).to_vec();
+    let encoding = Encoding::new(BufferSet::Compact, link.color);
+    let buffers = encoding.buffers.clone();
     let policy = Policy {
         token: token.clone(),
         server_name: "in-process demo server".into(),
@@ -114,11 +132,11 @@ fn start_local_from(
         buffers: buffers.clone(),
         window_mode: window.mode,
         max_sessions: host::session::DEFAULT_MAX_SESSIONS,
-        congestion,
+        congestion: link.congestion,
         effects: spec.effects()?,
     };
     let frames = Source::channel();
-    let source = Source::start(spec, buffers, frames.clone())?;
+    let source = Source::start(spec, encoding, frames.clone())?;
     let server = Server::start(
         "127.0.0.1:0".parse()?,
         &identity,

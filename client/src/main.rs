@@ -122,6 +122,11 @@ struct RunArgs {
     /// (as `server serve --congestion`).
     #[arg(long, default_value = "cubic")]
     congestion: host::tls::Congestion,
+    /// Colour codec of the in-process server (as `server serve
+    /// --color-codec`): `h264` (0.6 bits a pixel a frame), `h264@MBIT`,
+    /// `h264-444[@MBIT]`; `raw` or `zstd` for research.
+    #[arg(long, default_value = "h264", value_parser = clap::value_parser!(video::ColorCodec))]
+    color_codec: video::ColorCodec,
 }
 
 impl Default for RunArgs {
@@ -210,7 +215,9 @@ struct EvalArgs {
     #[arg(long, default_value = "lossless", value_parser = clap::value_parser!(protocol::wire::BufferSet))]
     geometry: protocol::wire::BufferSet,
     /// Colour through H.264 at a bitrate, e.g. `h264@12` (4:2:0, Mbit/s at
-    /// the fed rate) or `h264-444@12`; `raw` feeds colour as rendered.
+    /// the fed rate) or `h264-444@12`, or `h264` at 0.6 bits a pixel a
+    /// frame of the fed rate; `raw` (or lossless `zstd`) feeds colour as
+    /// rendered.
     #[arg(long, default_value = "raw", value_parser = clap::value_parser!(video::ColorCodec))]
     color_codec: video::ColorCodec,
     /// Fed frames before scoring starts.
@@ -319,7 +326,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         resolutions: args.resolutions,
         only: args.only,
         geometry: args.geometry,
-        color: args.color_codec.0,
+        color: args.color_codec,
         pass_clock: match args.pass_clock.as_str() {
             "wall" => Some(framegen::PassClock::Wall),
             "timestamps" => Some(framegen::PassClock::Timestamps),
@@ -440,11 +447,13 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
             );
         }
         println!(
-            "received {count} frames in {:.2} s; {} bytes; late {}, dropped {}; server reports sent {}, dropped {}",
+            "received {count} frames in {:.2} s; {} bytes; late {}, dropped {}, colour not decoded {} ({} keyframes asked); server reports sent {}, dropped {}",
             started.elapsed().as_secs_f64(),
             s.client.bytes_received,
             s.client.frames_late,
             s.client.frames_dropped,
+            s.color_errors,
+            s.keyframe_requests,
             s.server.map_or(0, |x| x.frames_sent),
             s.server.map_or(0, |x| x.frames_dropped),
         );
@@ -544,20 +553,24 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
+    let link = client::demo::Link {
+        congestion: args.congestion,
+        color: args.color_codec,
+    };
     runtime.block_on(async move {
         let local = match args.server {
             Some(_) => None,
             None => match &args.from_dump {
                 Some(dir) => {
                     println!("starting an in-process server replaying {}", dir.display());
-                    Some(client::demo::start_local_dump(dir, args.congestion)?)
+                    Some(client::demo::start_local_dump(dir, link)?)
                 }
                 None => {
                     println!(
                         "starting an in-process server: {} at {}x{}, {} fps",
                         args.scene, args.size.width, args.size.height, args.fps
                     );
-                    Some(client::demo::start_local(&args.scene, args.size, args.fps, args.congestion)?)
+                    Some(client::demo::start_local(&args.scene, args.size, args.fps, link)?)
                 }
             },
         };

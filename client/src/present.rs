@@ -300,12 +300,13 @@ pub async fn run_headless(
                 writer.write_frame(&shown)?;
             }
             if let (Some(sink), Some(image)) = (&config.window, &image) {
-                let rtt = session.stats().session.client.rtt_us as f64 / 1000.0;
+                let link = session.stats().session;
                 let stats = overlay(
                     &accounting,
                     received,
                     clock(),
-                    (&generation, &pusher.ingest_ms, rtt),
+                    (&generation, &pusher.ingest_ms, &decode_ms),
+                    (link.client.rtt_us as f64 / 1000.0, link.color_errors),
                     scheduler.drops(),
                 );
                 if !send_to_window(sink, image, stats) {
@@ -452,7 +453,8 @@ fn overlay(
     accounting: &Accounting,
     received: u64,
     now: Duration,
-    (generation, ingest, rtt_ms): (&[f64], &[f64], f64),
+    (generation, ingest, decode): (&[f64], &[f64], &[f64]),
+    (rtt_ms, color_errors): (f64, u64),
     drops: framegen::schedule::Drops,
 ) -> String {
     let secs = now.as_secs_f64().max(1e-3);
@@ -467,14 +469,16 @@ fn overlay(
     let host = Percentiles::of(recent.iter().map(|r| r.host_processing_ms).collect());
     format!(
         "incoming {:5.1} fps   generated {:5.1} fps   presented {:5.1} fps\n\
-         host {:5.2} ms   network rtt {:5.2} ms   ingest {:5.2} ms   generation {:5.2} ms\n\
+         host {:5.2} ms   network rtt {:5.2} ms   decode {:5.2} ms\n\
+         ingest {:5.2} ms   generation {:5.2} ms\n\
          latency p50 {:5.2} ms   p99 {:5.2} ms\n\
-         drops: network {}  late {}  scheduler {}",
+         drops: network {}  late {}  scheduler {}  colour errors {}",
         received as f64 / secs,
         generated as f64 / secs,
         records.len() as f64 / secs,
         host.p50,
         rtt_ms,
+        last(decode).p50,
         last(ingest).p50,
         last(generation).p50,
         latency.p50,
@@ -482,6 +486,7 @@ fn overlay(
         drops.network,
         drops.late,
         drops.scheduler,
+        color_errors,
     )
 }
 

@@ -23,7 +23,7 @@ fn config(inputs: Vec<Input>, out: &std::path::Path) -> EvalConfig {
         resolutions: vec![],
         only: vec![],
         geometry: protocol::wire::BufferSet::Lossless,
-        color: None,
+        color: video::ColorCodec::Raw,
         pass_clock: None,
         warmup: 2,
         heatmap_inputs: 1,
@@ -346,7 +346,7 @@ fn colour_through_h264_is_reported_and_scores_close_to_raw() {
             &dir.path().join(name),
         );
         c.geometry = protocol::wire::BufferSet::Compact;
-        c.color = color.parse::<video::ColorCodec>().unwrap().0;
+        c.color = color.parse::<video::ColorCodec>().unwrap();
         c.backends = vec![BackendKind::Cpu];
         c.only = vec!["gffe".into(), "interp".into()];
         c.heatmap_inputs = 0;

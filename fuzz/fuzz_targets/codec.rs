@@ -1,11 +1,13 @@
 //! Each codec's decoder on arbitrary payloads. The first byte picks the
-//! codec (bits 0–1, an index into `Codec::ALL`) and the pixel format (the
-//! rest, an index into `PixelFormat::ALL`), the next two the pixel count
+//! codec (an index into `Codec::ALL`, modulo its length) and the pixel
+//! format (the quotient, an index into `PixelFormat::ALL`), the next two the pixel count
 //! (every expected length up to 64 Ki pixels is reachable), the rest is the
 //! encoded payload. A decode fails with a typed error or returns exactly
 //! the expected length; what a lossless codec returns encodes and decodes
 //! to itself, and what the quantised ones return is in their range (depth
-//! not negative, motion finite; motion decodes against a fixed depth).
+//! not negative, motion finite; motion decodes against a fixed depth). A
+//! video codec is refused here: its payloads need the stream's decoder
+//! (fuzzed by the `video` target).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -19,8 +21,9 @@ fuzz_target!(|data: &[u8]| {
     let Some((count, payload)) = rest.split_first_chunk::<2>() else {
         return;
     };
-    let codec = Codec::ALL[usize::from(pick & 3)];
-    let format = PixelFormat::ALL[usize::from(pick >> 2) % PixelFormat::ALL.len()];
+    let n = Codec::ALL.len();
+    let codec = Codec::ALL[usize::from(pick) % n];
+    let format = PixelFormat::ALL[usize::from(pick) / n % PixelFormat::ALL.len()];
     let pixels = usize::from(u16::from_le_bytes(*count));
     let expected = pixels as u64 * u64::from(format.bytes_per_pixel());
     let depth: Vec<f32> = (0..pixels)
@@ -42,6 +45,7 @@ fuzz_target!(|data: &[u8]| {
                 assert!(!(d < 0.0), "negative depth {d}");
             }
         }
+        Codec::H264 => panic!("a video payload decoded without the stream's decoder"),
         Codec::MotionResidual => {
             let unit = format.channel_bytes() as usize;
             for v in raw.chunks_exact(unit) {

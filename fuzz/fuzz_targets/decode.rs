@@ -1,12 +1,13 @@
 //! Feeds arbitrary bytes to every decoder of the wire format: the one-shot
 //! message decoder, the streaming decoder (in chunks chosen by the input),
-//! and the whole per-frame stream decoder (wire + reassembly + codecs).
-//! Any panic, hang or allocation beyond the limits is a bug.
+//! and the whole per-frame stream decoder (wire + reassembly + codecs,
+//! video-coded colour through the `video` crate's H.264 decoder). Any
+//! panic, hang or allocation beyond the limits is a bug.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use protocol::Limits;
-use protocol::assemble::decode_frame_stream;
+use protocol::assemble::decode_frame_stream_with;
 use protocol::wire::{Decoder, decode_message};
 
 fuzz_target!(|data: &[u8]| {
@@ -37,5 +38,11 @@ fuzz_target!(|data: &[u8]| {
             }
         }
     }
-    let _ = decode_frame_stream(data, &limits);
+    let mut color = video::ColorDecoder::new().ok();
+    let color = color
+        .as_mut()
+        .map(|d| d as &mut dyn protocol::codec::stream::ColorStreamDecoder);
+    if let Ok(frame) = decode_frame_stream_with(data, &limits, color) {
+        assert!(frame.validate(&limits).is_ok());
+    }
 });

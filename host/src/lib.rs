@@ -5,10 +5,13 @@
 //!   `scene::render` or a dump replayed from disk;
 //! * [`pacer`]: sans-IO pacing of a frame sequence by simulation time, with
 //!   stale-frame skipping when the sender falls behind;
+//! * [`recovery`]: sans-IO keyframe recovery of one session's video-coded
+//!   colour;
 //! * [`tls`], [`session`], [`serve`]: the QUIC streaming endpoint: identity
 //!   and pinning, the handshake, and per-client sessions.
 
 pub mod pacer;
+pub mod recovery;
 pub mod serve;
 pub mod session;
 pub mod source;

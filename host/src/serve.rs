@@ -11,12 +11,13 @@
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use protocol::Limits;
 use protocol::wire::{self, Decoder, Hello, Message, MessageKind, Pong, ServerStats};
 use tokio::sync::{Semaphore, broadcast};
 
+use crate::recovery::{Decision, Recovery};
 use crate::session::{self, Policy};
 use crate::source::Feed;
 use crate::tls::Identity;
@@ -54,6 +55,12 @@ pub struct ClientCounters {
     pub dropped: AtomicU64,
     /// Payload bytes written.
     pub bytes: AtomicU64,
+    /// Frames held back while the client waited for a keyframe.
+    pub held_back: AtomicU64,
+    /// Keyframe requests the client sent.
+    pub keyframe_requests: AtomicU64,
+    /// Set by a keyframe request, taken by the session.
+    lost: std::sync::atomic::AtomicBool,
 }
 
 /// Server-wide counters.
@@ -238,7 +245,11 @@ async fn connection(
                 anyhow::bail!("no hello within {HELLO_TIMEOUT:?}");
             }
         };
-    decoder.accept_only(&[MessageKind::ClientStats, MessageKind::Bye]);
+    decoder.accept_only(&[
+        MessageKind::ClientStats,
+        MessageKind::Bye,
+        MessageKind::KeyframeRequest,
+    ]);
     let hello: Hello = match hello {
         Ok(h) => h,
         Err(e) => {
@@ -290,11 +301,17 @@ async fn connection(
     // A per-session source opens its dump and starts its (paused)
     // producer thread off the runtime, and is stopped and joined off it at
     // the end.
-    let (mut rx, source) = {
+    let subscription = {
         let feed = feed.clone();
         tokio::task::spawn_blocking(move || feed.subscribe()).await??
     };
-    let mut source = JoinedOffRuntime(source);
+    let (mut rx, keyframes) = (subscription.frames, subscription.keyframes);
+    let mut source = JoinedOffRuntime(subscription.source);
+    // The client starts from a keyframe: ask for one now.
+    let mut recovery = Recovery::new();
+    if recovery.ask(Instant::now()) {
+        keyframes.request();
+    }
     send.write_all(&wire::encode(&Message::Welcome(welcome))?)
         .await?;
     // A per-session replay paces from here, not from before the welcome:
@@ -321,11 +338,19 @@ async fn connection(
                 break Ok::<_, anyhow::Error>(());
             }
         };
+        let now = Instant::now();
+        if client.lost.swap(false, Ordering::Relaxed) {
+            recovery.lost();
+        }
         let frame = match frame {
             Ok(f) => f,
             Err(broadcast::error::RecvError::Lagged(n)) => {
                 client.dropped.fetch_add(n, Ordering::Relaxed);
                 counters.frames_dropped.fetch_add(n, Ordering::Relaxed);
+                recovery.lost();
+                if recovery.ask(now) {
+                    keyframes.request();
+                }
                 continue;
             }
             Err(broadcast::error::RecvError::Closed) => {
@@ -339,18 +364,34 @@ async fn connection(
                 break Ok(());
             }
         };
+        if recovery.on_frame(frame.keyframe) == Decision::Skip {
+            // Predicted from a frame the client does not have.
+            client.held_back.fetch_add(1, Ordering::Relaxed);
+            if recovery.ask(now) {
+                keyframes.request();
+            }
+            continue;
+        }
         let Ok(permit) = permits.clone().try_acquire_owned() else {
             // The client is behind: drop this frame rather than queue it.
             client.dropped.fetch_add(1, Ordering::Relaxed);
             counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
+            recovery.lost();
+            if recovery.ask(now) {
+                keyframes.request();
+            }
             continue;
         };
         let conn = conn.clone();
         let client = client.clone();
+        // Older frames first: a frame's stream completes before a newer
+        // one's, so a video decoder gets them in order.
+        let priority = i32::try_from(frame.index).map_or(i32::MIN, |i| -i);
         tokio::spawn(async move {
             let _permit = permit;
             let sent = async {
                 let mut stream = conn.open_uni().await?;
+                stream.set_priority(priority)?;
                 stream.write_all(&frame.bytes).await?;
                 stream.finish()?;
                 // Hold the in-flight slot until the client has acknowledged
@@ -372,6 +413,12 @@ async fn connection(
     counters
         .frames_sent
         .fetch_add(client.sent.load(Ordering::Relaxed), Ordering::Relaxed);
+    tracing::debug!(
+        session_id,
+        held_back = client.held_back.load(Ordering::Relaxed),
+        keyframe_requests = client.keyframe_requests.load(Ordering::Relaxed),
+        "session counters"
+    );
     control.abort();
     datagrams.abort();
     result
@@ -407,6 +454,11 @@ async fn control_loop(
         while let Ok(Some(msg)) = read_message(&mut recv, &mut decoder).await {
             match msg {
                 Message::ClientStats(s) => tracing::debug!(?s, "client stats"),
+                Message::KeyframeRequest(k) => {
+                    tracing::debug!(last_decoded = ?k.last_decoded, "keyframe requested");
+                    client.keyframe_requests.fetch_add(1, Ordering::Relaxed);
+                    client.lost.store(true, Ordering::Relaxed);
+                }
                 Message::Bye(b) => {
                     conn.close(close_code::DONE.into(), b.reason.as_bytes());
                     return;

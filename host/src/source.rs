@@ -6,17 +6,24 @@
 //! A live scene is rendered once and shared by all sessions ([`Feed::Live`]);
 //! a dump replay can instead start afresh for every session, from its first
 //! frame ([`Feed::PerSession`]).
+//!
+//! Video-coded colour (issue 19 §1) is encoded once too, by the producer:
+//! a session whose client joins or loses a frame asks the producer for a
+//! keyframe through the [`Channel`], and sends its client nothing until one
+//! comes ([`crate::recovery`]).
 
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use protocol::assemble::encode_frame_after;
+use protocol::assemble::encode_frame_with;
+use protocol::codec::stream::ColorStreamEncoder;
 use protocol::import::AnyDump;
 use protocol::wire::StreamBuffer;
-use protocol::{Frame, FrameSize};
+use protocol::{BufferKind, Codec, Frame, FrameSize};
 use tokio::sync::broadcast;
+use video::{ColorCodec, ColorEncoder};
 
 use crate::pacer::{Pace, Pacer};
 use scene::Scene;
@@ -31,6 +38,104 @@ pub struct StreamFrame {
     pub bytes: Vec<u8>,
     /// Encoded payload size per buffer, for reports.
     pub buffer_bytes: Vec<(protocol::BufferKind, u64)>,
+    /// Whether a receiver can start decoding here: always, unless colour
+    /// is video-coded and this frame's is predicted from the one before.
+    pub keyframe: bool,
+}
+
+/// How a source encodes its frames: the buffers it sends, and the
+/// setting of a video-coded colour buffer.
+#[derive(Clone, Debug)]
+pub struct Encoding {
+    /// Buffers every frame carries.
+    pub buffers: Vec<StreamBuffer>,
+    /// The colour codec; its setting is used when the colour buffer's
+    /// codec is [`Codec::H264`].
+    pub color: ColorCodec,
+}
+
+impl Encoding {
+    /// `geometry`'s depth and motion, and colour by `color`.
+    pub fn new(geometry: protocol::wire::BufferSet, color: ColorCodec) -> Self {
+        Self {
+            buffers: geometry.buffers(color.codec()).to_vec(),
+            color,
+        }
+    }
+
+    /// The colour encoder for a stream of `size` at `fps`, if colour is
+    /// video-coded; fails if libavcodec lacks the encoder.
+    fn color_encoder(&self, size: FrameSize, fps: f64) -> anyhow::Result<Option<ColorEncoder>> {
+        let video = self
+            .buffers
+            .iter()
+            .any(|b| b.kind == BufferKind::Color && b.codec == Codec::H264);
+        let settings = match self.color.settings(size, fps) {
+            Some(s) if video => s,
+            None if video => ColorCodec::DEFAULT_LIVE
+                .settings(size, fps)
+                .ok_or_else(|| anyhow::anyhow!("no default video setting"))?,
+            _ => return Ok(None),
+        };
+        Ok(Some(ColorEncoder::new(settings, fps)?))
+    }
+}
+
+/// Buffers alone: a video-coded colour buffer gets the automatic rate.
+impl From<Vec<StreamBuffer>> for Encoding {
+    fn from(buffers: Vec<StreamBuffer>) -> Self {
+        let color = match buffers.iter().find(|b| b.kind == BufferKind::Color) {
+            Some(b) if b.codec == Codec::H264 => ColorCodec::DEFAULT_LIVE,
+            Some(b) if b.codec == Codec::Zstd => ColorCodec::Zstd,
+            _ => ColorCodec::Raw,
+        };
+        Self { buffers, color }
+    }
+}
+
+/// A stream's frames and the way back to their producer: sessions
+/// subscribe to the frames, and ask the producer for a keyframe when their
+/// client needs one.
+#[derive(Clone, Debug)]
+pub struct Channel {
+    frames: broadcast::Sender<Arc<StreamFrame>>,
+    keyframe: KeyframeRequests,
+}
+
+/// The way back from sessions to a producer: requests for a keyframe
+/// (requests between two frames make one keyframe). Holding it does not
+/// keep the frames' channel open.
+#[derive(Clone, Debug, Default)]
+pub struct KeyframeRequests(Arc<AtomicBool>);
+
+impl KeyframeRequests {
+    /// Asks the producer to make its next frame a keyframe.
+    pub fn request(&self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+
+    /// Takes a pending request.
+    fn take(&self) -> bool {
+        self.0.swap(false, Ordering::Relaxed)
+    }
+}
+
+impl Channel {
+    /// A receiver of every frame sent from now on.
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<StreamFrame>> {
+        self.frames.subscribe()
+    }
+
+    /// Sends a frame to every subscriber (no subscriber is fine: clients
+    /// join a live stream); returns how many got it.
+    pub fn send(&self, frame: Arc<StreamFrame>) -> usize {
+        self.frames.send(frame).unwrap_or(0)
+    }
+
+    /// Where sessions ask its producer for keyframes.
+    pub fn keyframes(&self) -> KeyframeRequests {
+        self.keyframe.clone()
+    }
 }
 
 /// What to stream.
@@ -98,34 +203,54 @@ pub struct Source {
 #[derive(Clone, Debug)]
 pub enum Feed {
     /// One shared live stream: sessions join it where it is.
-    Live(broadcast::Sender<Arc<StreamFrame>>),
+    Live(Channel),
     /// A fresh source per session (dump replays): every client gets the
     /// whole sequence, and its session ends after the last frame.
     PerSession {
         /// What to replay.
         spec: SourceSpec,
-        /// The buffers to encode.
-        buffers: Vec<StreamBuffer>,
+        /// How to encode it.
+        encoding: Encoding,
     },
 }
 
 impl Feed {
     /// A receiver for one session, and the source it owns (per-session
     /// feeds: opened, paused until [`Source::resume`], so that its pacing
-    /// starts when the session does), which stops when dropped.
-    pub fn subscribe(
-        &self,
-    ) -> anyhow::Result<(broadcast::Receiver<Arc<StreamFrame>>, Option<Source>)> {
+    /// starts when the session does), which stops when dropped; and the
+    /// channel to ask for keyframes on.
+    pub fn subscribe(&self) -> anyhow::Result<Subscription> {
         match self {
-            Feed::Live(tx) => Ok((tx.subscribe(), None)),
-            Feed::PerSession { spec, buffers } => {
-                let tx = Source::channel();
-                let rx = tx.subscribe();
-                let source = Source::start_paused(spec.clone(), buffers.clone(), tx)?;
-                Ok((rx, Some(source)))
+            Feed::Live(channel) => Ok(Subscription {
+                frames: channel.subscribe(),
+                keyframes: channel.keyframes(),
+                source: None,
+            }),
+            Feed::PerSession { spec, encoding } => {
+                // The producer thread holds the only sender: when the
+                // replay ends, the session sees the channel close.
+                let channel = Source::channel();
+                let frames = channel.subscribe();
+                let keyframes = channel.keyframes();
+                let source = Source::start_paused(spec.clone(), encoding.clone(), channel)?;
+                Ok(Subscription {
+                    frames,
+                    keyframes,
+                    source: Some(source),
+                })
             }
         }
     }
+}
+
+/// One session's view of a [`Feed`].
+pub struct Subscription {
+    /// The frames.
+    pub frames: broadcast::Receiver<Arc<StreamFrame>>,
+    /// Where to ask for keyframes.
+    pub keyframes: KeyframeRequests,
+    /// The session's own source (per-session feeds).
+    pub source: Option<Source>,
 }
 
 /// How many frames a lagging client may be behind before it loses the
@@ -134,18 +259,22 @@ pub const BROADCAST_DEPTH: usize = 4;
 
 impl Source {
     /// A channel for [`Source::start`] with [`BROADCAST_DEPTH`].
-    pub fn channel() -> broadcast::Sender<Arc<StreamFrame>> {
-        broadcast::channel(BROADCAST_DEPTH).0
+    pub fn channel() -> Channel {
+        Channel {
+            frames: broadcast::channel(BROADCAST_DEPTH).0,
+            keyframe: KeyframeRequests::default(),
+        }
     }
 
-    /// Starts producing `spec` with `buffers` into `frames`. Fails early if
-    /// the scene or dump cannot be opened.
+    /// Starts producing `spec` with `encoding` into `frames`. Fails early
+    /// if the scene or dump cannot be opened, or the colour encoder is
+    /// missing.
     pub fn start(
         spec: SourceSpec,
-        buffers: Vec<StreamBuffer>,
-        frames: broadcast::Sender<Arc<StreamFrame>>,
+        encoding: impl Into<Encoding>,
+        frames: Channel,
     ) -> anyhow::Result<Self> {
-        let mut source = Self::start_paused(spec, buffers, frames)?;
+        let mut source = Self::start_paused(spec, encoding, frames)?;
         source.resume();
         Ok(source)
     }
@@ -155,12 +284,15 @@ impl Source {
     /// first frame and the start of its pacing.
     pub fn start_paused(
         spec: SourceSpec,
-        buffers: Vec<StreamBuffer>,
-        frames: broadcast::Sender<Arc<StreamFrame>>,
+        encoding: impl Into<Encoding>,
+        frames: Channel,
     ) -> anyhow::Result<Self> {
+        let encoding: Encoding = encoding.into();
         let stats = Arc::new(SourceStats::default());
         let stop = Arc::new(AtomicBool::new(false));
         let mut producer = Producer::open(&spec)?;
+        let (size, fps) = producer.size_and_fps();
+        let mut color = encoding.color_encoder(size, fps)?;
         let (go, released) = std::sync::mpsc::channel::<()>();
         let thread = {
             // The thread owns its sender: when a finite source ends and the
@@ -174,7 +306,11 @@ impl Source {
                     if stop.load(Ordering::Relaxed) {
                         return;
                     }
-                    if let Err(e) = producer.run(&frames, &buffers, &stats, &stop) {
+                    let coders = Coders {
+                        buffers: &encoding.buffers,
+                        color: color.as_mut(),
+                    };
+                    if let Err(e) = producer.run(&frames, coders, &stats, &stop) {
                         tracing::error!("frame source stopped: {e:#}");
                     }
                 })?
@@ -227,7 +363,21 @@ enum Producer {
     Dump { reader: Box<AnyDump>, looped: bool },
 }
 
+/// What the producer encodes with.
+struct Coders<'a> {
+    buffers: &'a [StreamBuffer],
+    color: Option<&'a mut ColorEncoder>,
+}
+
 impl Producer {
+    /// The stream's displayed size and rate.
+    fn size_and_fps(&self) -> (FrameSize, f64) {
+        match self {
+            Producer::Scene { renderer, fps } => (renderer.size(), *fps),
+            Producer::Dump { reader, .. } => (reader.size(), reader.fps()),
+        }
+    }
+
     fn open(spec: &SourceSpec) -> anyhow::Result<Self> {
         Ok(match spec {
             SourceSpec::Scene {
@@ -354,11 +504,12 @@ impl Producer {
 
     fn run(
         &mut self,
-        frames: &broadcast::Sender<Arc<StreamFrame>>,
-        buffers: &[StreamBuffer],
+        frames: &Channel,
+        coders: Coders<'_>,
         stats: &SourceStats,
         stop: &AtomicBool,
     ) -> anyhow::Result<()> {
+        let Coders { buffers, mut color } = coders;
         let epoch = Instant::now();
         let mut pacer = Pacer::new(1.0);
         let mut k = 0u64;
@@ -399,11 +550,19 @@ impl Producer {
             };
             gap.run = 0;
             frame.meta.cut |= std::mem::take(&mut gap.cut_next);
-            let encoded = encode_frame_after(
+            if frames.keyframe.take() {
+                if let Some(c) = color.as_deref_mut() {
+                    c.request_keyframe();
+                }
+            }
+            let encoded = encode_frame_with(
                 &frame,
                 previous.as_ref(),
                 buffers,
                 protocol::codec::DEFAULT_ZSTD_LEVEL,
+                color
+                    .as_deref_mut()
+                    .map(|c| c as &mut dyn ColorStreamEncoder),
             )?;
             previous = Some(frame.meta);
             // Host processing = render (or read) + encode, as a duration.
@@ -418,11 +577,17 @@ impl Producer {
                 .iter()
                 .map(|b| (b.kind, b.payload_len))
                 .collect();
-            // No receivers yet is fine: clients join a live stream.
-            let _ = frames.send(Arc::new(StreamFrame {
+            let keyframe = encoded
+                .header
+                .buffers
+                .iter()
+                .zip(&encoded.payloads)
+                .all(|(b, p)| b.codec != Codec::H264 || video::is_keyframe(&p.data));
+            frames.send(Arc::new(StreamFrame {
                 index: frame.meta.index,
                 bytes,
                 buffer_bytes,
+                keyframe,
             }));
             stats.produced.fetch_add(1, Ordering::Relaxed);
             k += 1;
@@ -468,11 +633,18 @@ mod tests {
     /// Runs `spec` to its end and returns the frames' indices and cuts.
     fn replay(spec: &SourceSpec) -> (Vec<(u64, bool)>, SourceStats, anyhow::Result<()>) {
         let mut producer = Producer::open(spec).unwrap();
-        let tx = broadcast::channel(64).0;
+        let tx = Channel {
+            frames: broadcast::channel(64).0,
+            keyframe: KeyframeRequests::default(),
+        };
         let mut rx = tx.subscribe();
         let stats = SourceStats::default();
         let buffers = StreamBuffer::default_set(protocol::Codec::Raw);
-        let result = producer.run(&tx, &buffers, &stats, &AtomicBool::new(false));
+        let coders = Coders {
+            buffers: &buffers,
+            color: None,
+        };
+        let result = producer.run(&tx, coders, &stats, &AtomicBool::new(false));
         let mut sent = vec![];
         while let Ok(f) = rx.try_recv() {
             let mut decoder = protocol::wire::Decoder::new(protocol::Limits::default());

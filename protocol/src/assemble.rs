@@ -4,6 +4,7 @@
 
 use std::borrow::Cow;
 
+use crate::codec::stream::{ColorStreamDecoder, ColorStreamEncoder};
 use crate::codec::{self, Codec, CodecError, depth, motion};
 use crate::frame::{BufferDesc, BufferKind, Frame, FrameMeta};
 use crate::wire::{
@@ -87,7 +88,21 @@ impl EncodedFrame {
     /// The header is validated again and payloads must match it one to one,
     /// so an `EncodedFrame` built by hand is held to the same rules as one
     /// from the [`FrameAssembler`]; the result is a validated [`Frame`].
+    /// A frame whose colour is video-coded needs the stream's decoder:
+    /// see [`EncodedFrame::decode_with`].
     pub fn decode(&self) -> Result<Frame, AssembleError> {
+        self.decode_with(None)
+    }
+
+    /// [`EncodedFrame::decode`], with the stream's colour decoder for a
+    /// codec whose state spans frames ([`codec::stream`]). The decoder sees
+    /// the colour payload before any other buffer is decoded, so it is fed
+    /// every frame whose header and payloads checked out, even when another
+    /// buffer then fails.
+    pub fn decode_with(
+        &self,
+        mut color: Option<&mut dyn ColorStreamDecoder>,
+    ) -> Result<Frame, AssembleError> {
         let limits = Limits::default();
         Message::FrameHeader(self.header.clone())
             .validate(&limits)
@@ -116,10 +131,34 @@ impl EncodedFrame {
                 });
             }
         }
-        // Motion residuals predict from the decoded depth: they go last.
+        // A video stream's decoder first; motion residuals predict from the
+        // decoded depth: they go last.
         let mut order: Vec<_> = self.header.buffers.iter().zip(&self.payloads).collect();
-        order.sort_by_key(|(desc, _)| desc.codec == Codec::MotionResidual);
+        order.sort_by_key(|(desc, _)| match desc.codec {
+            Codec::H264 => 0,
+            Codec::MotionResidual => 2,
+            _ => 1,
+        });
         for (desc, payload) in order {
+            if desc.codec == Codec::H264 {
+                let codec_error = |source| AssembleError::Codec {
+                    kind: desc.kind,
+                    source,
+                };
+                let decoder = color
+                    .as_deref_mut()
+                    .filter(|d| d.codec() == desc.codec && desc.kind == BufferKind::Color)
+                    .ok_or(codec_error(CodecError::Stateful(desc.codec)))?;
+                decoder
+                    .decode_color(&payload.data, meta.size, &mut frame.color)
+                    .map_err(|source| {
+                        codec_error(CodecError::Stream {
+                            codec: desc.codec,
+                            source,
+                        })
+                    })?;
+                continue;
+            }
             let raw_len = desc.format.raw_len(meta.size);
             let depth =
                 (frame.depth.len() as u64 == meta.size.pixels()).then_some(&frame.depth[..]);
@@ -162,6 +201,19 @@ pub fn encode_frame_after(
     buffers: &[StreamBuffer],
     level: i32,
 ) -> Result<EncodedFrame, AssembleError> {
+    encode_frame_with(frame, previous, buffers, level, None)
+}
+
+/// [`encode_frame_after`], with the stream's colour encoder for a codec
+/// whose state spans frames ([`codec::stream`]): it is given every frame
+/// this returns, in order.
+pub fn encode_frame_with(
+    frame: &Frame,
+    previous: Option<&FrameMeta>,
+    buffers: &[StreamBuffer],
+    level: i32,
+    mut color: Option<&mut dyn ColorStreamEncoder>,
+) -> Result<EncodedFrame, AssembleError> {
     frame.validate(&Limits::default())?;
     let previous = previous.filter(|_| !frame.meta.cut);
     let width = frame.meta.size.width;
@@ -192,6 +244,17 @@ pub fn encode_frame_after(
                     motion::Predictor::new(&frame.meta, previous.unwrap_or(&frame.meta));
                 motion::encode(&predictor, &frame.motion, &seen_depth, width, level)
             }
+            Codec::H264 => match color.as_deref_mut() {
+                Some(encoder) if encoder.codec() == b.codec && b.kind == BufferKind::Color => {
+                    encoder
+                        .encode_color(frame.meta.size, &frame.color)
+                        .map_err(|source| CodecError::Stream {
+                            codec: b.codec,
+                            source,
+                        })
+                }
+                _ => Err(CodecError::Stateful(b.codec)),
+            },
             other => {
                 let raw = frame.buffer_bytes(b.kind, b.format)?;
                 codec::encode_with_level(other, b.format, &raw, level)
@@ -344,6 +407,16 @@ impl FrameAssembler {
 /// Decodes a complete per-frame stream held in memory (a test helper and the
 /// path for replaying captured streams): wire decoding, reassembly, codecs.
 pub fn decode_frame_stream(bytes: &[u8], limits: &Limits) -> Result<Frame, AssembleError> {
+    decode_frame_stream_with(bytes, limits, None)
+}
+
+/// [`decode_frame_stream`], with the stream's colour decoder
+/// ([`EncodedFrame::decode_with`]).
+pub fn decode_frame_stream_with(
+    bytes: &[u8],
+    limits: &Limits,
+    color: Option<&mut dyn ColorStreamDecoder>,
+) -> Result<Frame, AssembleError> {
     let mut decoder = Decoder::new(*limits);
     decoder.feed(bytes);
     let mut assembler = FrameAssembler::new();
@@ -361,7 +434,7 @@ pub fn decode_frame_stream(bytes: &[u8], limits: &Limits) -> Result<Frame, Assem
     }
     assembler.finish()?;
     match complete {
-        Some(f) => f.decode(),
+        Some(f) => f.decode_with(color),
         None => Err(AssembleError::Incomplete { missing: vec![] }),
     }
 }
@@ -478,6 +551,98 @@ mod tests {
             ),
             Err(CodecError::NeedsDepth)
         ));
+    }
+
+    /// A stand-in video coder for the wiring (the real one is crate
+    /// `video`): the payload is a count, then the colour's f16 bytes; the
+    /// decoder refuses a count that is not the next.
+    #[derive(Default)]
+    struct Counting(u8);
+
+    impl ColorStreamEncoder for Counting {
+        fn codec(&self) -> Codec {
+            Codec::H264
+        }
+        fn encode_color(
+            &mut self,
+            _: crate::FrameSize,
+            color: &[[half::f16; 4]],
+        ) -> Result<Vec<u8>, codec::stream::StreamError> {
+            self.0 += 1;
+            let bytes = color.iter().flatten().flat_map(|c| c.to_le_bytes());
+            Ok(std::iter::once(self.0).chain(bytes).collect())
+        }
+    }
+
+    impl ColorStreamDecoder for Counting {
+        fn codec(&self) -> Codec {
+            Codec::H264
+        }
+        fn decode_color(
+            &mut self,
+            payload: &[u8],
+            _: crate::FrameSize,
+            out: &mut Vec<[half::f16; 4]>,
+        ) -> Result<(), codec::stream::StreamError> {
+            self.0 += 1;
+            if payload.first() != Some(&self.0) {
+                return Err("out of sequence".into());
+            }
+            let values: Vec<half::f16> = payload[1..]
+                .chunks_exact(2)
+                .map(|b| half::f16::from_le_bytes([b[0], b[1]]))
+                .collect();
+            out.clear();
+            out.extend(values.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]));
+            Ok(())
+        }
+    }
+
+    /// Video-coded colour goes through the stream's coders, in order, and
+    /// the decoder sees it before the other buffers; without a coder it is
+    /// a typed error, and so is the coder's refusal.
+    #[test]
+    fn video_coded_colour_goes_through_the_streams_coders() {
+        let buffers = StreamBuffer::compact_set(Codec::H264);
+        let frames: Vec<Frame> = (0..3).map(|i| sample_frame(i, 16, 8)).collect();
+        let mut encoder = Counting::default();
+        let encoded: Vec<EncodedFrame> = frames
+            .iter()
+            .map(|f| encode_frame_with(f, None, &buffers, 1, Some(&mut encoder)).unwrap())
+            .collect();
+        assert!(matches!(
+            encode_frame(&frames[0], &buffers, 1),
+            Err(AssembleError::Codec {
+                kind: BufferKind::Color,
+                source: CodecError::Stateful(Codec::H264)
+            })
+        ));
+        assert!(matches!(
+            encoded[0].decode(),
+            Err(AssembleError::Codec {
+                source: CodecError::Stateful(Codec::H264),
+                ..
+            })
+        ));
+        let mut decoder = Counting::default();
+        let back = encoded[0].decode_with(Some(&mut decoder)).unwrap();
+        assert_eq!(back.color, frames[0].color);
+        // Frame 1 lost: frame 2 is refused by the coder, as a codec error
+        // of the colour buffer.
+        assert!(matches!(
+            encoded[2].decode_with(Some(&mut decoder)),
+            Err(AssembleError::Codec {
+                kind: BufferKind::Color,
+                source: CodecError::Stream {
+                    codec: Codec::H264,
+                    ..
+                }
+            })
+        ));
+        // Colour is the only buffer the codec suits.
+        let mut wrong = buffers.to_vec();
+        wrong[1].codec = Codec::H264;
+        assert!(encode_frame_with(&frames[0], None, &wrong, 1, Some(&mut encoder)).is_err());
     }
 
     #[test]

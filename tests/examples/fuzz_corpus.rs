@@ -1,6 +1,6 @@
 //! Writes the fuzz targets' seed corpus (`fuzz/seeds/<target>/`) from real
-//! data: frames of the analytic scene encoded as they travel (raw and zstd
-//! colour), the handshake messages, each encoded buffer for the codec
+//! data: frames of the analytic scene encoded as they travel (raw, zstd
+//! and H.264 colour), the handshake messages, each encoded buffer for the codec
 //! target, and a one-frame native dump's files for the readers.
 //!
 //! `cargo run -p tests --example fuzz_corpus [-- DIR]` (default `fuzz/seeds`).
@@ -8,7 +8,8 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use protocol::assemble::{encode_frame, encode_frame_after};
+use protocol::assemble::{encode_frame, encode_frame_with};
+use protocol::codec::stream::ColorStreamEncoder;
 use protocol::codec::{Codec, DEFAULT_ZSTD_LEVEL};
 use protocol::dump::{DumpWriter, Manifest, frame_paths};
 use protocol::wire::{self, Hello, Message, StreamBuffer, WIRE_VERSION, WindowMode};
@@ -57,11 +58,16 @@ fn main() -> anyhow::Result<()> {
         StreamBuffer::default_set(Codec::Raw),
         StreamBuffer::default_set(Codec::Zstd),
         StreamBuffer::compact_set(Codec::Zstd),
+        StreamBuffer::compact_set(Codec::H264),
     ];
     for (c, buffers) in sets.iter().enumerate() {
+        // One colour stream per set, from its keyframe on.
+        let mut color = video::ColorEncoder::new("h264@0.5".parse()?, 30.0)?;
         for (i, frame) in frames.iter().enumerate() {
             let previous = i.checked_sub(1).map(|p| &frames[p].meta);
-            let encoded = encode_frame_after(frame, previous, buffers, DEFAULT_ZSTD_LEVEL)?;
+            let encoder = (buffers[0].codec == Codec::H264)
+                .then_some(&mut color as &mut dyn ColorStreamEncoder);
+            let encoded = encode_frame_with(frame, previous, buffers, DEFAULT_ZSTD_LEVEL, encoder)?;
             write(
                 &out.join("decode"),
                 &format!("frame-{c}-{i}"),
@@ -73,13 +79,19 @@ fn main() -> anyhow::Result<()> {
                 .zip(&encoded.header.buffers)
                 .enumerate()
             {
-                // The codec target's first byte: the codec (two bits, in
-                // the target's order), then the format.
+                // The codec target decodes no video (the decode and video
+                // targets do).
+                if desc.codec == Codec::H264 {
+                    continue;
+                }
+                // The codec target's first byte: the codec (an index in
+                // the target's order, modulo their number), then the format.
+                let n = Codec::ALL.len() as u8;
                 let codec = Codec::ALL
                     .iter()
                     .position(|c| *c == desc.codec)
                     .unwrap_or(0) as u8;
-                let pick = codec | format_index(desc.format) << 2;
+                let pick = codec + format_index(desc.format) * n;
                 let seed = [
                     &[pick][..],
                     &(SIZE.pixels() as u16).to_le_bytes(),
@@ -133,7 +145,7 @@ fn main() -> anyhow::Result<()> {
             version: WIRE_VERSION,
             client_name: "seed".into(),
             token: token.into(),
-            codecs: vec![Codec::Raw, Codec::Zstd],
+            codecs: Codec::ALL.to_vec(),
             max_size: FrameSize::new(8192, 8192),
             window_modes: vec![WindowMode::KeepDensity, WindowMode::KeepSize],
             extras: vec![],

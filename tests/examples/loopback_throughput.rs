@@ -92,6 +92,7 @@ async fn main() -> anyhow::Result<()> {
                         .map(|b| (b.kind, b.payload_len))
                         .collect(),
                     bytes: e.to_stream_bytes()?,
+                    keyframe: true,
                 }))
             })
             .collect::<anyhow::Result<_>>()?;
@@ -99,8 +100,7 @@ async fn main() -> anyhow::Result<()> {
         let mut total_bytes = 0usize;
         for f in &encoded {
             let start = Instant::now();
-            tx.send(f.clone())
-                .map_err(|_| anyhow::anyhow!("no subscriber"))?;
+            anyhow::ensure!(tx.send(f.clone()) > 0, "no subscriber");
             let got = tokio::time::timeout(Duration::from_secs(10), session.frames.recv())
                 .await?
                 .ok_or_else(|| anyhow::anyhow!("session ended"))?;

@@ -99,7 +99,7 @@ async fn a_blender_render_streams_without_import() {
             dir: fixture(),
             looped: false,
         },
-        buffers,
+        encoding: buffers.into(),
     };
     let server = Server::start("127.0.0.1:0".parse().unwrap(), &identity, policy, feed).unwrap();
     let config = client::ConnectConfig::new(

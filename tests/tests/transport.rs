@@ -2,6 +2,8 @@
 //! streaming a dump to real clients on 127.0.0.1 with ephemeral ports.
 //! Every test is bounded in time.
 
+mod loopback;
+
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -10,135 +12,11 @@ use client::{ConnectConfig, ConnectError, Pin};
 use glam::DVec3;
 use host::serve::Server;
 use host::session::Policy;
-use host::source::{Feed, Source, SourceSpec, StreamFrame};
+use host::source::{Feed, Source, SourceSpec};
 use host::tls::{Congestion, Identity};
-use protocol::dump::{DumpReader, DumpWriter, Manifest};
+use loopback::*;
 use protocol::wire::{RejectReason, StreamBuffer, WindowMode};
-use protocol::{Codec, Frame, FrameSize};
-use tokio::sync::broadcast;
-
-const SIZE: FrameSize = FrameSize::new(96, 54);
-const FRAMES: u64 = 24;
-const TOKEN: &str = "let-me-in";
-/// Replay rate of the live-feed fixture. A live feed drops frames for a
-/// client that falls behind (by design); 20 fps leaves a loaded 2-core CI
-/// machine, running the other tests in parallel, room to keep up, so the
-/// "every frame arrives" checks test the transport, not the machine.
-const REPLAY_FPS: f64 = 20.0;
-
-struct Fixture {
-    _dir: tempfile::TempDir,
-    dump: std::path::PathBuf,
-    identity: Identity,
-    server: Server,
-    frames: broadcast::Sender<Arc<StreamFrame>>,
-    buffers: Vec<StreamBuffer>,
-}
-
-fn write_dump(dir: &std::path::Path) {
-    let mut w = DumpWriter::create(dir, Manifest::new(REPLAY_FPS, SIZE, "transport test")).unwrap();
-    for i in 0..FRAMES {
-        w.write_frame(&tests::render(i, 60.0, DVec3::ZERO, SIZE))
-            .unwrap();
-    }
-    w.finish().unwrap();
-}
-
-async fn fixture(buffers: Vec<StreamBuffer>) -> Fixture {
-    fixture_with(buffers, host::session::DEFAULT_MAX_SESSIONS).await
-}
-
-async fn fixture_with(buffers: Vec<StreamBuffer>, max_sessions: usize) -> Fixture {
-    fixture_under(buffers, max_sessions, Congestion::default()).await
-}
-
-async fn fixture_under(
-    buffers: Vec<StreamBuffer>,
-    max_sessions: usize,
-    congestion: Congestion,
-) -> Fixture {
-    let dir = tempfile::tempdir().unwrap();
-    let dump = dir.path().join("dump");
-    write_dump(&dump);
-    let identity = Identity::load_or_create(&dir.path().join("identity")).unwrap();
-    let policy = Policy {
-        token: TOKEN.into(),
-        server_name: "test".into(),
-        size: SIZE,
-        max_frame: SIZE,
-        fps: REPLAY_FPS,
-        buffers: buffers.clone(),
-        window_mode: WindowMode::Off,
-        max_sessions,
-        congestion,
-        effects: protocol::Effects::UNKNOWN,
-    };
-    let frames = Source::channel();
-    let server = Server::start(
-        "127.0.0.1:0".parse().unwrap(),
-        &identity,
-        policy,
-        Feed::Live(frames.clone()),
-    )
-    .unwrap();
-    Fixture {
-        _dir: dir,
-        dump,
-        identity,
-        server,
-        frames,
-        buffers,
-    }
-}
-
-impl Fixture {
-    fn addr(&self) -> SocketAddr {
-        self.server.local_addr().unwrap()
-    }
-
-    fn config(&self) -> ConnectConfig {
-        ConnectConfig::new(self.addr(), Pin::Sha256(self.identity.fingerprint()), TOKEN)
-    }
-
-    fn start_source(&self) -> Source {
-        Source::start(
-            SourceSpec::Dump {
-                dir: self.dump.clone(),
-                looped: false,
-            },
-            self.buffers.clone(),
-            self.frames.clone(),
-        )
-        .unwrap()
-    }
-}
-
-/// Frames equal except the host time, which the server extends by its
-/// encode time.
-fn same_frame(got: &Frame, want: &Frame) -> bool {
-    let mut g = got.clone();
-    g.meta.host_processing = want.meta.host_processing;
-    got.meta.host_processing >= want.meta.host_processing && g == *want
-}
-
-async fn receive_all(session: &mut client::Session) -> Vec<Frame> {
-    let mut out = Vec::new();
-    while out.len() < FRAMES as usize {
-        match tokio::time::timeout(Duration::from_secs(10), session.frames.recv()).await {
-            Ok(Some(a)) => out.push(a.frame),
-            Ok(None) | Err(_) => break,
-        }
-    }
-    out
-}
-
-fn all_raw() -> Vec<StreamBuffer> {
-    let mut b = StreamBuffer::default_set(Codec::Raw).to_vec();
-    for x in &mut b {
-        x.codec = Codec::Raw;
-    }
-    b
-}
+use protocol::{Codec, FrameSize};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_clients_receive_every_frame_in_order_and_intact() {
@@ -150,11 +28,7 @@ async fn two_clients_receive_every_frame_in_order_and_intact() {
         assert_ne!(a.welcome.session_id, b.welcome.session_id);
         let source = fx.start_source();
         let (ra, rb) = tokio::join!(receive_all(&mut a), receive_all(&mut b));
-        let originals: Vec<Frame> = DumpReader::open(&fx.dump)
-            .unwrap()
-            .frames()
-            .map(Result::unwrap)
-            .collect();
+        let originals = fx.originals();
         for got in [&ra, &rb] {
             assert_eq!(got.len(), FRAMES as usize, "every frame arrives");
             for (g, w) in got.iter().zip(&originals) {
@@ -459,33 +333,8 @@ async fn a_bad_server_is_reported_and_a_reconnect_gets_the_stream_again() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dump_replays_from_the_start_for_every_session() {
     let fx = fixture(StreamBuffer::default_set(Codec::Zstd).to_vec()).await;
-    let policy = Policy {
-        token: TOKEN.into(),
-        server_name: "replay".into(),
-        size: SIZE,
-        max_frame: SIZE,
-        fps: 60.0,
-        buffers: fx.buffers.clone(),
-        window_mode: WindowMode::Off,
-        max_sessions: host::session::DEFAULT_MAX_SESSIONS,
-        congestion: Congestion::default(),
-        effects: protocol::Effects::UNKNOWN,
-    };
-    let feed = Feed::PerSession {
-        spec: SourceSpec::Dump {
-            dir: fx.dump.clone(),
-            looped: false,
-        },
-        buffers: fx.buffers.clone(),
-    };
-    let replay = Server::start("127.0.0.1:0".parse().unwrap(), &fx.identity, policy, feed).unwrap();
-    let mut config = fx.config();
-    config.addr = replay.local_addr().unwrap();
-    let originals: Vec<Frame> = DumpReader::open(&fx.dump)
-        .unwrap()
-        .frames()
-        .map(Result::unwrap)
-        .collect();
+    let (replay, config) = fx.replay_server(fx.buffers.clone().into());
+    let originals = fx.originals();
     // Two clients, one after the other: each gets the whole dump from frame 0.
     for _ in 0..2 {
         let mut s = client::connect(config.clone()).await.unwrap();
@@ -630,13 +479,7 @@ async fn frames_cross_an_impaired_network_intact_and_in_order() {
 async fn frames_cross_an_impaired_network(congestion: Congestion) {
     let buffers = StreamBuffer::default_set(Codec::Zstd).to_vec();
     let fx = fixture_under(buffers, host::session::DEFAULT_MAX_SESSIONS, congestion).await;
-    let imp: client::impair::Impairment = "loss=1%,delay=5ms,jitter=2ms,reorder=0.5%,seed=3"
-        .parse()
-        .unwrap();
-    let relay = client::impair::Relay::start(fx.addr(), imp).await.unwrap();
-    let mut config = fx.config();
-    config.addr = relay.local_addr();
-    let mut session = client::connect(config).await.unwrap();
+    let (relay, mut session) = fx.connect_impaired(3).await;
     let source = fx.start_source();
     // Until the stream has been quiet for 2 s (the replay ends).
     let mut got = vec![];
@@ -646,11 +489,7 @@ async fn frames_cross_an_impaired_network(congestion: Congestion) {
         got.push(a.frame);
     }
     source.stop();
-    let originals: Vec<Frame> = DumpReader::open(&fx.dump)
-        .unwrap()
-        .frames()
-        .map(Result::unwrap)
-        .collect();
+    let originals = fx.originals();
     let stats = session.stats().client;
     eprintln!(
         "impaired link, {congestion:?}: {} of {FRAMES} frames shown, {} late, server dropped {}, relay {:?} / {:?}",

@@ -18,6 +18,8 @@ pub struct ColorDecoder {
     picture: ff::frame::Video,
     planes: Planes,
     awaiting_keyframe: bool,
+    /// Sequence number of the last payload decoded.
+    last: Option<u32>,
 }
 
 impl ColorDecoder {
@@ -50,6 +52,7 @@ impl ColorDecoder {
             picture: ff::frame::Video::empty(),
             planes: Planes::default(),
             awaiting_keyframe: true,
+            last: None,
         })
     }
 
@@ -94,6 +97,10 @@ impl ColorDecoder {
         if flags & !FLAGS != 0 {
             return Err(VideoError::BadPayload("unknown flags"));
         }
+        let (sequence, rest) = rest
+            .split_first_chunk::<4>()
+            .ok_or(VideoError::BadPayload("no sequence number"))?;
+        let sequence = u32::from_le_bytes(*sequence);
         let (peak, unit) = rest
             .split_first_chunk::<2>()
             .ok_or(VideoError::BadPayload("no peak"))?;
@@ -104,8 +111,18 @@ impl ColorDecoder {
         if unit.is_empty() {
             return Err(VideoError::BadPayload("no access unit"));
         }
-        if self.awaiting_keyframe && flags & FLAG_KEYFRAME == 0 {
+        let keyframe = flags & FLAG_KEYFRAME != 0;
+        if self.awaiting_keyframe && !keyframe {
             return Err(VideoError::AwaitingKeyframe);
+        }
+        // A predicted picture must follow the one it was predicted from.
+        if let Some(last) = self.last.filter(|_| !keyframe) {
+            if sequence != last.wrapping_add(1) {
+                return Err(VideoError::Gap {
+                    last,
+                    got: sequence,
+                });
+            }
         }
         let chroma = if flags & FLAG_YUV444 != 0 {
             Chroma::Yuv444
@@ -182,6 +199,7 @@ impl ColorDecoder {
         }
         transfer::from_planes(planes, width, height, chroma, peak, out);
         self.awaiting_keyframe = false;
+        self.last = Some(sequence);
         Ok(())
     }
 }

@@ -22,6 +22,8 @@ pub struct ColorEncoder {
     open: Option<Open>,
     planes: Planes,
     keyframe_next: bool,
+    /// Sequence number of the next payload.
+    sequence: u32,
 }
 
 struct Open {
@@ -54,6 +56,7 @@ impl ColorEncoder {
             open: None,
             planes: Planes::default(),
             keyframe_next: true,
+            sequence: 0,
         })
     }
 
@@ -125,8 +128,9 @@ impl ColorEncoder {
     }
 
     /// The payload of one frame's colour (`width × height` linear RGBA):
-    /// a flags byte, the frame's peak (`f16`, little-endian), then one H.264
-    /// access unit.
+    /// a flags byte, the payload's sequence number (`u32` LE, one more
+    /// than the last), the frame's peak (`f16` LE), then one H.264 access
+    /// unit.
     pub fn encode(
         &mut self,
         width: u32,
@@ -150,6 +154,15 @@ impl ColorEncoder {
         let Some(open) = self.open.as_mut() else {
             return Err(VideoError::Missing("an open encoder"));
         };
+        // The encoder may still hold the last frame's buffers as a
+        // reference: write into buffers of our own.
+        // SAFETY: `open.frame` owns a valid AVFrame.
+        let writable = unsafe { ff::ffi::av_frame_make_writable(open.frame.as_mut_ptr()) };
+        if writable < 0 {
+            return Err(VideoError::ffmpeg("making the frame writable")(
+                ff::Error::from(writable),
+            ));
+        }
         let planes = &self.planes;
         let (_, sy) = chroma.subsampling();
         for (index, plane, w, h) in [
@@ -192,8 +205,10 @@ impl ColorEncoder {
         if chroma == Chroma::Yuv444 {
             flags |= FLAG_YUV444;
         }
-        let mut payload = Vec::with_capacity(3 + data.len());
+        let mut payload = Vec::with_capacity(crate::HEADER + data.len());
         payload.push(flags);
+        payload.extend_from_slice(&self.sequence.to_le_bytes());
+        self.sequence = self.sequence.wrapping_add(1);
         payload.extend_from_slice(&transfer::peak(color).to_le_bytes());
         payload.extend_from_slice(data);
         Ok(payload)

@@ -35,11 +35,20 @@ fn settings_parse_and_print() {
     assert_eq!(s.to_string(), "h264@12");
     let s: VideoSettings = "h264-444@2.5".parse().unwrap();
     assert_eq!((s.bitrate, s.chroma), (2_500_000, Chroma::Yuv444));
-    assert_eq!("raw".parse::<ColorCodec>().unwrap(), ColorCodec(None));
+    assert_eq!("raw".parse::<ColorCodec>().unwrap(), ColorCodec::Raw);
+    for name in ["raw", "zstd", "h264", "h264-444", "h264@12", "h264-444@0.5"] {
+        assert_eq!(name.parse::<ColorCodec>().unwrap().to_string(), name);
+    }
+    // The automatic rate: 0.6 bits a pixel a frame.
+    let auto = ColorCodec::DEFAULT_LIVE
+        .settings(protocol::FrameSize::new(1280, 720), 30.0)
+        .unwrap();
+    assert_eq!((auto.bitrate, auto.chroma), (16_588_800, Chroma::Yuv420));
     assert_eq!(
-        "h264@12".parse::<ColorCodec>().unwrap().to_string(),
-        "h264@12"
+        ColorCodec::Zstd.settings(protocol::FrameSize::new(64, 64), 30.0),
+        None
     );
+    assert!("h264@0".parse::<ColorCodec>().is_err());
     for bad in ["h264", "h265@3", "h264@", "h264@-1", "h264@nan", "h264@1e9"] {
         assert!(bad.parse::<VideoSettings>().is_err(), "{bad}");
     }
@@ -122,7 +131,7 @@ fn bad_payloads_are_errors_and_the_stream_recovers_on_a_keyframe() {
         Err(VideoError::BadPayload(_))
     ));
     let mut nan_peak = first.clone();
-    nan_peak[1..3].copy_from_slice(&f16::NAN.to_le_bytes());
+    nan_peak[5..7].copy_from_slice(&f16::NAN.to_le_bytes());
     assert!(matches!(
         dec.decode(&nan_peak, w, h, &mut out),
         Err(VideoError::BadPayload(_))
@@ -160,6 +169,45 @@ fn bad_payloads_are_errors_and_the_stream_recovers_on_a_keyframe() {
     assert!(!dec.awaiting_keyframe());
     dec.decode(&second, w, h, &mut out).unwrap();
     assert!(psnr(&picture(w, h, 1), &out) > 25.0);
+}
+
+/// A predicted payload that does not follow the last one decoded (one was
+/// lost) is a gap, and the decoder waits for a keyframe; protocol's stream
+/// traits code through the same encoder and decoder.
+#[test]
+fn a_missed_payload_is_a_gap_until_the_next_keyframe() {
+    use protocol::codec::stream::{ColorStreamDecoder, ColorStreamEncoder};
+    let size = protocol::FrameSize::new(64, 48);
+    let mut enc = ColorEncoder::new(settings(Chroma::Yuv420, 0.5), 30.0).unwrap();
+    let mut dec = ColorDecoder::new().unwrap();
+    assert_eq!(enc.codec(), protocol::Codec::H264);
+    let mut out = Vec::new();
+    let payloads: Vec<Vec<u8>> = (0..4)
+        .map(|t| enc.encode_color(size, &picture(64, 48, t)).unwrap())
+        .collect();
+    assert!(is_keyframe(&payloads[0]) && !is_keyframe(&payloads[1]));
+    dec.decode_color(&payloads[0], size, &mut out).unwrap();
+    // Payload 1 lost.
+    let gap = dec.decode_color(&payloads[2], size, &mut out).unwrap_err();
+    assert!(
+        matches!(
+            gap.downcast_ref::<VideoError>(),
+            Some(VideoError::Gap { last: 0, got: 2 })
+        ),
+        "{gap}"
+    );
+    assert!(dec.awaiting_keyframe());
+    assert!(matches!(
+        dec.decode(&payloads[3], 64, 48, &mut out),
+        Err(VideoError::AwaitingKeyframe)
+    ));
+    enc.request_keyframe();
+    let key = enc.encode_color(size, &picture(64, 48, 4)).unwrap();
+    assert!(is_keyframe(&key));
+    dec.decode_color(&key, size, &mut out).unwrap();
+    let next = enc.encode_color(size, &picture(64, 48, 5)).unwrap();
+    dec.decode_color(&next, size, &mut out).unwrap();
+    assert!(psnr(&picture(64, 48, 5), &out) > 25.0);
 }
 
 #[test]

@@ -94,7 +94,7 @@ pub struct EvalConfig {
     /// (lossless), or through the stream's quantised codecs (compact).
     pub geometry: protocol::wire::BufferSet,
     /// Colour through H.264 at this setting (issue 19 §1), or as rendered.
-    pub color: Option<video::VideoSettings>,
+    pub color: video::ColorCodec,
     /// Fed frames before scoring starts (history and background warm up).
     pub warmup: usize,
     /// Heat maps for the first this many inputs...

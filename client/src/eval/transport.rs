@@ -14,20 +14,21 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use half::f16;
-use protocol::assemble::encode_frame_after;
+use protocol::assemble::{encode_frame_after, encode_frame_with};
 use protocol::codec::DEFAULT_ZSTD_LEVEL;
+use protocol::codec::stream::{ColorStreamDecoder, ColorStreamEncoder, StreamError};
 use protocol::wire::{BufferSet, StreamBuffer};
 use protocol::{BufferKind, Codec, Frame, FrameMeta};
 use serde::Serialize;
 use video::transfer::display_psnr;
-use video::{ColorDecoder, ColorEncoder, VideoSettings};
+use video::{ColorCodec, ColorDecoder, ColorEncoder};
 
 /// The stream's codecs between the renderer and the generator.
 pub struct Transport {
     buffers: [StreamBuffer; 3],
     /// Whether frames are coded at all.
     coded: bool,
-    color: Option<VideoSettings>,
+    color: ColorCodec,
     /// Display rate; a stream fed every `step`th frame runs at `fps / step`.
     fps: f64,
     streams: BTreeMap<usize, Stream>,
@@ -36,7 +37,6 @@ pub struct Transport {
 /// One fed rate's codec state and tallies.
 struct Stream {
     color: Option<(ColorEncoder, ColorDecoder)>,
-    decoded: Vec<[f16; 4]>,
     frames: u64,
     bytes: BTreeMap<&'static str, u64>,
     psnr_sum: f64,
@@ -46,6 +46,45 @@ struct Stream {
     decode: Vec<Duration>,
     color_encode: Vec<Duration>,
     color_decode: Vec<Duration>,
+}
+
+/// A stream coder that adds the wall time of each frame it codes to a
+/// tally: the colour codec's share of a frame's encode or decode.
+struct Timed<'a, T>(&'a mut T, &'a mut Vec<Duration>);
+
+impl<T: ColorStreamEncoder> ColorStreamEncoder for Timed<'_, T> {
+    fn codec(&self) -> Codec {
+        self.0.codec()
+    }
+
+    fn encode_color(
+        &mut self,
+        size: protocol::FrameSize,
+        color: &[[f16; 4]],
+    ) -> Result<Vec<u8>, StreamError> {
+        let started = Instant::now();
+        let payload = self.0.encode_color(size, color);
+        self.1.push(started.elapsed());
+        payload
+    }
+}
+
+impl<T: ColorStreamDecoder> ColorStreamDecoder for Timed<'_, T> {
+    fn codec(&self) -> Codec {
+        self.0.codec()
+    }
+
+    fn decode_color(
+        &mut self,
+        payload: &[u8],
+        size: protocol::FrameSize,
+        out: &mut Vec<[f16; 4]>,
+    ) -> Result<(), StreamError> {
+        let started = Instant::now();
+        let result = self.0.decode_color(payload, size, out);
+        self.1.push(started.elapsed());
+        result
+    }
 }
 
 /// What one fed rate's stream cost (`report.json`'s `scenes[].stream`).
@@ -68,8 +107,7 @@ pub struct StreamCost {
     pub color_psnr: Option<(f64, f64)>,
     /// Mean ꟻLIP of the decoded colour against the rendered.
     pub color_flip: Option<f64>,
-    /// Median wall time to encode a frame (all buffers; colour is also
-    /// copied raw when it is video-coded), ms.
+    /// Median wall time to encode a frame (all buffers), ms.
     pub encode_ms: f64,
     /// Median wall time to decode one, ms.
     pub decode_ms: f64,
@@ -96,10 +134,11 @@ impl Transport {
     /// Fed frames through `set`'s depth and motion codecs and, with
     /// `color`, colour through H.264 at that setting; `fps` is the display
     /// rate.
-    pub fn new(set: BufferSet, color: Option<VideoSettings>, fps: f64) -> Self {
+    pub fn new(set: BufferSet, color: ColorCodec, fps: f64) -> Self {
+        let video = color.codec() == Codec::H264;
         Self {
-            buffers: set.buffers(Codec::Raw),
-            coded: set == BufferSet::Compact || color.is_some(),
+            buffers: set.buffers(if video { Codec::H264 } else { Codec::Raw }),
+            coded: set == BufferSet::Compact || video,
             color,
             fps,
             streams: BTreeMap::new(),
@@ -121,11 +160,10 @@ impl Transport {
         let stream = match self.streams.entry(step) {
             std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::btree_map::Entry::Vacant(e) => e.insert(Stream {
-                color: match self.color {
+                color: match self.color.settings(frame.meta.size, fps) {
                     Some(s) => Some((ColorEncoder::new(s, fps)?, ColorDecoder::new()?)),
                     None => None,
                 },
-                decoded: Vec::new(),
                 frames: 0,
                 bytes: BTreeMap::new(),
                 psnr_sum: 0.0,
@@ -138,37 +176,39 @@ impl Transport {
             }),
         };
         let started = Instant::now();
-        let encoded = encode_frame_after(&frame, previous, &self.buffers, DEFAULT_ZSTD_LEVEL)?;
-        let color_payload = match &mut stream.color {
-            Some((encoder, _)) => {
-                let size = frame.meta.size;
+        let (encoded, decoded) = match &mut stream.color {
+            Some((encoder, decoder)) => {
+                let mut timed = Timed(encoder, &mut stream.color_encode);
+                let encoded = encode_frame_with(
+                    &frame,
+                    previous,
+                    &self.buffers,
+                    DEFAULT_ZSTD_LEVEL,
+                    Some(&mut timed),
+                )?;
+                stream.encode.push(started.elapsed());
                 let started = Instant::now();
-                let payload = encoder.encode(size.width, size.height, &frame.color)?;
-                stream.color_encode.push(started.elapsed());
-                Some(payload)
+                let decoded =
+                    encoded.decode_with(Some(&mut Timed(decoder, &mut stream.color_decode)))?;
+                stream.decode.push(started.elapsed());
+                (encoded, decoded)
             }
-            None => None,
+            None => {
+                let encoded =
+                    encode_frame_after(&frame, previous, &self.buffers, DEFAULT_ZSTD_LEVEL)?;
+                stream.encode.push(started.elapsed());
+                let started = Instant::now();
+                let decoded = encoded.decode()?;
+                stream.decode.push(started.elapsed());
+                (encoded, decoded)
+            }
         };
-        stream.encode.push(started.elapsed());
-        let started = Instant::now();
-        let mut decoded = encoded.decode()?;
-        if let (Some((_, decoder)), Some(payload)) = (&mut stream.color, &color_payload) {
-            let size = frame.meta.size;
-            let started = Instant::now();
-            decoder.decode(payload, size.width, size.height, &mut stream.decoded)?;
-            stream.color_decode.push(started.elapsed());
-            decoded.color.clone_from(&stream.decoded);
-        }
-        stream.decode.push(started.elapsed());
+        let mut decoded = decoded;
         stream.frames += 1;
         for (desc, payload) in encoded.header.buffers.iter().zip(&encoded.payloads) {
-            let len = match (desc.kind, &color_payload) {
-                (BufferKind::Color, Some(p)) => p.len(),
-                _ => payload.data.len(),
-            };
-            *stream.bytes.entry(kind_name(desc.kind)).or_default() += len as u64;
+            *stream.bytes.entry(kind_name(desc.kind)).or_default() += payload.data.len() as u64;
         }
-        if color_payload.is_some() {
+        if stream.color.is_some() {
             let q = display_psnr(&frame.color, &decoded.color);
             stream.psnr_sum += q;
             stream.psnr_min = stream.psnr_min.min(q);
@@ -207,9 +247,10 @@ impl Transport {
                     fps,
                     step,
                     frames: s.frames,
-                    color_codec: self
-                        .color
-                        .map_or_else(|| "raw".to_owned(), |c| c.to_string()),
+                    color_codec: s.color.as_ref().map_or_else(
+                        || self.color.to_string(),
+                        |(encoder, _)| encoder.settings().to_string(),
+                    ),
                     total_mbit: mbit.values().sum(),
                     mbit,
                     color_psnr: s

@@ -2,6 +2,11 @@
 //! bitrates (issue 19), depth quantised with a stated error bound
 //! ([`depth`]) and motion as a residual over the camera ([`motion`]).
 //!
+//! Colour at real bitrates goes through a video codec ([`Codec::H264`]),
+//! whose state spans frames: protocol only names it and hands its payloads
+//! to the stream's own coder ([`stream`]), which lives outside this crate
+//! (crate `video`).
+//!
 //! [`Codec::Zstd`] first splits the pixels into byte planes (byte 0 of every
 //! channel value, then byte 1, …): the sign/exponent bytes of neighbouring
 //! floats are nearly equal, so the planes compress far better than the
@@ -16,6 +21,7 @@ use crate::{BufferKind, PixelFormat};
 pub mod depth;
 pub mod motion;
 mod planar;
+pub mod stream;
 
 /// zstd level used by [`encode`]: level 1 is the fastest that still compresses
 /// depth and motion well; pass another to [`encode_with_level`].
@@ -34,6 +40,9 @@ pub enum Codec {
     /// Motion minus the camera-induced motion, quantised to 1/128 px
     /// ([`motion`]); decoding needs the frame's depth.
     MotionResidual,
+    /// Colour as one H.264 access unit a frame, coded and decoded by the
+    /// stream's own coder ([`stream`]), in order, from a keyframe on.
+    H264,
 }
 
 /// A buffer that cannot be encoded or decoded.
@@ -74,6 +83,20 @@ pub enum CodecError {
         /// Its format.
         format: PixelFormat,
     },
+    /// The codec's state spans frames, and the stream's coder for it was not
+    /// given ([`stream`]).
+    #[error("{0:?} is coded by the stream's own coder, which was not given")]
+    Stateful(Codec),
+    /// The stream's coder refused this frame (a video payload that is
+    /// corrupt, or predicted from a frame the receiver lost).
+    #[error("{codec:?}: {source}")]
+    Stream {
+        /// The codec.
+        codec: Codec,
+        /// What the coder reported.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// The encoded payload is longer than a codec can produce for the size.
     #[error("encoded payload of {len} bytes is outside {min}..={max} for this codec")]
     EncodedLength {
@@ -88,11 +111,12 @@ pub enum CodecError {
 
 impl Codec {
     /// Every codec, in declaration order.
-    pub const ALL: [Codec; 4] = [
+    pub const ALL: [Codec; 5] = [
         Codec::Raw,
         Codec::Zstd,
         Codec::QuantDepth,
         Codec::MotionResidual,
+        Codec::H264,
     ];
 
     /// The range of encoded lengths this codec can produce for `raw` bytes of
@@ -118,6 +142,11 @@ impl Codec {
                     motion::HEADER as u64 + zstd_compress_bound(codes),
                 )
             }
+            // A video access unit is far smaller than the f16 frame: even
+            // uncompressed (I_PCM) macroblocks at 10 bits and 4:4:4 take
+            // 3.75 bytes a pixel against raw RGB's 6; the margin holds
+            // the parameter sets and the coder's own header.
+            Codec::H264 => (1, raw.saturating_add(stream::MAX_OVERHEAD)),
         }
     }
 
@@ -131,6 +160,8 @@ impl Codec {
                 kind == BufferKind::Motion
                     && matches!(format, PixelFormat::Rg32Float | PixelFormat::Rg16Float)
             }
+            // Alpha is not carried.
+            Codec::H264 => kind == BufferKind::Color && format == PixelFormat::Rgb16Float,
         }
     }
 
@@ -178,6 +209,7 @@ pub fn encode_with_level(
             )
         }
         Codec::MotionResidual => Err(CodecError::NeedsDepth),
+        Codec::H264 => Err(CodecError::Stateful(codec)),
     }
 }
 
@@ -325,6 +357,7 @@ pub fn decode_with(
                     .collect(),
             })
         }
+        Codec::H264 => Err(CodecError::Stateful(codec)),
     }
 }
 

@@ -201,6 +201,15 @@ pub struct Bye {
     pub reason: String,
 }
 
+/// A client's decoder lost its reference (a frame dropped, late or
+/// corrupt): it asks for a keyframe on the control stream, and decodes no
+/// video-coded colour until one arrives (issue 19 §1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct KeyframeRequest {
+    /// Index of the newest frame the client decoded, if any (for logs).
+    pub last_decoded: Option<u64>,
+}
+
 /// Every message of the protocol.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Message {
@@ -226,6 +235,8 @@ pub enum Message {
     Pong(Pong),
     /// See [`Bye`].
     Bye(Bye),
+    /// See [`KeyframeRequest`].
+    KeyframeRequest(KeyframeRequest),
 }
 
 fn check_text(what: &'static str, s: &str) -> Result<(), ValidationError> {
@@ -424,7 +435,8 @@ impl Message {
             Message::ClientStats(_)
             | Message::ServerStats(_)
             | Message::Ping(_)
-            | Message::Pong(_) => Ok(()),
+            | Message::Pong(_)
+            | Message::KeyframeRequest(_) => Ok(()),
         }
     }
 }

@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::{BufferKind, Limits, ValidationError};
 
 /// The wire format version this crate speaks.
-pub const WIRE_VERSION: u16 = 3;
+pub const WIRE_VERSION: u16 = 4;
 
 /// Size of the fixed message header.
 pub const HEADER_LEN: usize = 8;
@@ -68,6 +68,8 @@ pub enum MessageKind {
     Pong = 10,
     /// [`Bye`]
     Bye = 11,
+    /// [`KeyframeRequest`]
+    KeyframeRequest = 12,
 }
 
 impl MessageKind {
@@ -86,6 +88,7 @@ impl MessageKind {
             9 => Ping,
             10 => Pong,
             11 => Bye,
+            12 => KeyframeRequest,
             _ => return None,
         })
     }
@@ -123,6 +126,7 @@ impl Message {
             Message::Ping(_) => MessageKind::Ping,
             Message::Pong(_) => MessageKind::Pong,
             Message::Bye(_) => MessageKind::Bye,
+            Message::KeyframeRequest(_) => MessageKind::KeyframeRequest,
         }
     }
 }
@@ -240,6 +244,7 @@ pub fn encode_into(msg: &Message, out: &mut Vec<u8>) -> Result<(), WireError> {
         Message::Ping(m) => enc(bincode::serde::encode_into_std_write(m, &mut w, c))?,
         Message::Pong(m) => enc(bincode::serde::encode_into_std_write(m, &mut w, c))?,
         Message::Bye(m) => enc(bincode::serde::encode_into_std_write(m, &mut w, c))?,
+        Message::KeyframeRequest(m) => enc(bincode::serde::encode_into_std_write(m, &mut w, c))?,
     }
     let body = out.len() - start - HEADER_LEN;
     let len = u32::try_from(body).map_err(|_| WireError::Encode {
@@ -372,6 +377,7 @@ pub fn decode_body(kind: MessageKind, body: &[u8], limits: &Limits) -> Result<Me
         MessageKind::Ping => Message::Ping(decode_exact(kind, body)?),
         MessageKind::Pong => Message::Pong(decode_exact(kind, body)?),
         MessageKind::Bye => Message::Bye(decode_exact(kind, body)?),
+        MessageKind::KeyframeRequest => Message::KeyframeRequest(decode_exact(kind, body)?),
     };
     msg.validate(limits)
         .map_err(|source| WireError::Invalid { kind, source })?;

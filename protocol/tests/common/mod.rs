@@ -251,6 +251,8 @@ pub fn message() -> impl Strategy<Value = Message> {
         (any::<u64>(), any::<u64>())
             .prop_map(|(seq, sent_us)| Message::Pong(Pong { seq, sent_us })),
         text().prop_map(|reason| Message::Bye(Bye { reason })),
+        any::<Option<u64>>()
+            .prop_map(|last_decoded| Message::KeyframeRequest(KeyframeRequest { last_decoded })),
     ]
 }
 

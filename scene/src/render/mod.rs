@@ -305,6 +305,11 @@ impl Renderer {
         &self.passes
     }
 
+    /// The displayed size it renders at (a widened window renders more).
+    pub fn size(&self) -> FrameSize {
+        self.size
+    }
+
     /// The scene.
     pub fn scene(&self) -> &Scene {
         &self.scene

@@ -1,0 +1,118 @@
+//! Keyframe recovery for one session, sans-IO (issue 19 §1): a client
+//! decodes video-coded colour only from a keyframe on, through every frame
+//! after it. When it joins, when the server drops a frame for it, or when
+//! it says it lost one ([`protocol::wire::KeyframeRequest`]), the session
+//! sends it nothing until the next keyframe (predicted frames would be
+//! undecodable, wasted bandwidth) and asks the producer for one: at once,
+//! then again every [`KEYFRAME_RETRY`] while it waits. That bound is also
+//! all one client can make the shared producer spend on keyframes.
+//!
+//! Without video-coded colour every frame is a keyframe and nothing is
+//! ever held back.
+
+use std::time::{Duration, Instant};
+
+/// How long a session waits for a keyframe before asking again, and the
+/// least time between two of its requests.
+pub const KEYFRAME_RETRY: Duration = Duration::from_millis(500);
+
+/// What to do with a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Decision {
+    /// Send it.
+    Send,
+    /// Hold it back: the client cannot decode it.
+    Skip,
+}
+
+/// Whether a session's client can decode the next frame.
+#[derive(Debug)]
+pub struct Recovery {
+    waiting: bool,
+    asked: Option<Instant>,
+}
+
+impl Default for Recovery {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Recovery {
+    /// A new session: its client starts from a keyframe.
+    pub fn new() -> Self {
+        Self {
+            waiting: true,
+            asked: None,
+        }
+    }
+
+    /// Whether the client waits for a keyframe.
+    pub fn waiting(&self) -> bool {
+        self.waiting
+    }
+
+    /// The client lost a frame (the server dropped it, or the client said
+    /// so): from now on it waits for a keyframe.
+    pub fn lost(&mut self) {
+        self.waiting = true;
+    }
+
+    /// Whether to ask the producer for a keyframe `now`: while waiting, at
+    /// most once every [`KEYFRAME_RETRY`].
+    pub fn ask(&mut self, now: Instant) -> bool {
+        let due = self.waiting
+            && self
+                .asked
+                .is_none_or(|at| now.saturating_duration_since(at) >= KEYFRAME_RETRY);
+        if due {
+            self.asked = Some(now);
+        }
+        due
+    }
+
+    /// A frame to send, `keyframe` or not.
+    pub fn on_frame(&mut self, keyframe: bool) -> Decision {
+        if keyframe {
+            self.waiting = false;
+        }
+        if self.waiting {
+            Decision::Skip
+        } else {
+            Decision::Send
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_session_waits_for_a_keyframe_and_asks_at_a_bounded_rate() {
+        let t0 = Instant::now();
+        let ms = |m: u64| t0 + Duration::from_millis(m);
+        let mut r = Recovery::new();
+        // Joining: ask at once, hold predicted frames back.
+        assert!(r.waiting() && r.ask(t0));
+        assert_eq!(r.on_frame(false), Decision::Skip);
+        assert!(!r.ask(ms(100)), "asked again within the retry time");
+        assert!(r.ask(ms(500)), "no keyframe came: ask again");
+        assert_eq!(r.on_frame(true), Decision::Send);
+        assert_eq!(r.on_frame(false), Decision::Send);
+        assert!(!r.ask(ms(600)), "nothing to ask for");
+        // A loss soon after: the request waits out the retry time, and a
+        // client that keeps saying so gets no more than one request in it.
+        r.lost();
+        assert!(!r.ask(ms(700)));
+        assert_eq!(r.on_frame(false), Decision::Skip);
+        r.lost();
+        assert!(!r.ask(ms(900)));
+        assert!(r.ask(ms(1000)));
+        assert_eq!(r.on_frame(true), Decision::Send);
+        // Without video every frame is a keyframe: nothing is held back.
+        let mut plain = Recovery::new();
+        plain.lost();
+        assert_eq!(plain.on_frame(true), Decision::Send);
+    }
+}
