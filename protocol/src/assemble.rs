@@ -602,14 +602,14 @@ mod tests {
     /// the decoder sees it before the other buffers; without a coder it is
     /// a typed error, and so is the coder's refusal.
     #[test]
-    fn video_coded_colour_goes_through_the_streams_coders() {
+    fn video_coded_colour_goes_through_the_streams_coders() -> Result<(), AssembleError> {
         let buffers = StreamBuffer::compact_set(Codec::H264);
         let frames: Vec<Frame> = (0..3).map(|i| sample_frame(i, 16, 8)).collect();
         let mut encoder = Counting::default();
-        let encoded: Vec<EncodedFrame> = frames
+        let encoded = frames
             .iter()
-            .map(|f| encode_frame_with(f, None, &buffers, 1, Some(&mut encoder)).unwrap())
-            .collect();
+            .map(|f| encode_frame_with(f, None, &buffers, 1, Some(&mut encoder)))
+            .collect::<Result<Vec<EncodedFrame>, _>>()?;
         assert!(matches!(
             encode_frame(&frames[0], &buffers, 1),
             Err(AssembleError::Codec {
@@ -625,7 +625,7 @@ mod tests {
             })
         ));
         let mut decoder = Counting::default();
-        let back = encoded[0].decode_with(Some(&mut decoder)).unwrap();
+        let back = encoded[0].decode_with(Some(&mut decoder))?;
         assert_eq!(back.color, frames[0].color);
         // Frame 1 lost: frame 2 is refused by the coder, as a codec error
         // of the colour buffer.
@@ -643,6 +643,7 @@ mod tests {
         let mut wrong = buffers.to_vec();
         wrong[1].codec = Codec::H264;
         assert!(encode_frame_with(&frames[0], None, &wrong, 1, Some(&mut encoder)).is_err());
+        Ok(())
     }
 
     #[test]
