@@ -9,8 +9,8 @@
 //!
 //! Video-coded colour (issue 19 §1) is encoded once too, by the producer:
 //! a session whose client joins or loses a frame asks the producer for a
-//! keyframe through the [`Channel`], and sends its client nothing until one
-//! comes ([`crate::recovery`]).
+//! keyframe through the channel's [`KeyframeRequests`], and sends its
+//! client nothing until one comes ([`crate::recovery`]).
 
 use std::path::PathBuf;
 use std::sync::Arc;
