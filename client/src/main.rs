@@ -214,12 +214,15 @@ struct EvalArgs {
     /// quantised codecs, encoded and decoded as `serve` and `connect` do).
     #[arg(long, default_value = "lossless", value_parser = clap::value_parser!(protocol::wire::BufferSet))]
     geometry: protocol::wire::BufferSet,
-    /// Colour through H.264 at a bitrate, e.g. `h264@12` (4:2:0, Mbit/s at
-    /// the fed rate) or `h264-444@12`, or `h264` at 0.6 bits a pixel a
-    /// frame of the fed rate; `raw` (or lossless `zstd`) feeds colour as
-    /// rendered.
-    #[arg(long, default_value = "raw", value_parser = clap::value_parser!(video::ColorCodec))]
-    color_codec: video::ColorCodec,
+    /// How fed frames' colour travels: through H.264 at a bitrate, e.g.
+    /// `h264@12` (4:2:0, Mbit/s at the fed rate) or `h264-444@12`, or
+    /// `h264` at 0.6 bits a pixel a frame of the fed rate; `raw` (or
+    /// lossless `zstd`) as rendered. A list is a bitrate sweep: every
+    /// variant through the first, gffe and interp through each further
+    /// one (e.g. `raw,h264@8,h264@16,h264@32`), with a table and a plot
+    /// of ꟻLIP against Mbit/s.
+    #[arg(long, alias = "codecs", default_value = "raw", value_delimiter = ',', value_parser = clap::value_parser!(video::ColorCodec))]
+    color_codec: Vec<video::ColorCodec>,
     /// Fed frames before scoring starts.
     #[arg(long, default_value_t = 2)]
     warmup: usize,
@@ -326,7 +329,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         resolutions: args.resolutions,
         only: args.only,
         geometry: args.geometry,
-        color: args.color_codec,
+        colors: args.color_codec,
         pass_clock: match args.pass_clock.as_str() {
             "wall" => Some(framegen::PassClock::Wall),
             "timestamps" => Some(framegen::PassClock::Timestamps),

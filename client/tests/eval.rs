@@ -1,6 +1,7 @@
 //! `client eval` end to end on small inputs: the report's files exist and
 //! parse, every number is in range, the expected quality ordering shows,
-//! a recorded dump scores exactly like the scene it was rendered from, and
+//! a recorded dump scores like the scene it was rendered from (exactly
+//! where motion vectors are not used), and
 //! the adaptive-window variants compare against the displayed view.
 
 use client::eval::sequence::{Input, RenderOrigin};
@@ -23,7 +24,7 @@ fn config(inputs: Vec<Input>, out: &std::path::Path) -> EvalConfig {
         resolutions: vec![],
         only: vec![],
         geometry: protocol::wire::BufferSet::Lossless,
-        color: video::ColorCodec::Raw,
+        colors: vec![video::ColorCodec::Raw],
         pass_clock: None,
         warmup: 2,
         heatmap_inputs: 1,
@@ -112,9 +113,19 @@ fn methods_on_a_scene_and_on_its_dump() {
         let shares: f64 = q.regions.iter().map(|r| r.share).sum();
         assert!((shares - 1.0).abs() < 1e-9);
         let d = dumped.rows.iter().find(|r| r.label == row.label).unwrap();
-        // The same frames from a dump score the same.
-        assert!((d.quality.psnr - q.psnr).abs() < 1e-9, "{}", row.label);
-        assert!((d.quality.flip - q.flip).abs() < 1e-9, "{}", row.label);
+        // The same frames from a dump score the same where motion vectors
+        // are not used (repeat, reproject, the oracle's true geometry);
+        // elsewhere closely: the scene's fed frames are rendered at the fed
+        // rate, the dump's motion is composed through the skipped frames.
+        let (dp, df) = (
+            (d.quality.psnr - q.psnr).abs(),
+            (d.quality.flip - q.flip).abs(),
+        );
+        if ["repeat", "reproject", client::eval::variant::ORACLE].contains(&row.label.as_str()) {
+            assert!(dp < 1e-9 && df < 1e-9, "{}", row.label);
+        } else {
+            assert!(dp < 1.0 && df < 0.003, "{}: {dp} dB, {df}", row.label);
+        }
         if row.label == client::eval::variant::ORACLE {
             // Not a generator: untimed, on no front.
             assert!(row.timing.is_empty() && row.front_all.is_empty());
@@ -333,52 +344,95 @@ fn the_compact_stream_scores_as_the_rendered_frames() {
     }
 }
 
-/// Colour through H.264 (issue 19 §1) at a bitrate generous for the size:
-/// the report states each fed rate's stream (Mbit/s per buffer, colour
-/// PSNR, codec times), near its target bitrate, and the generator's output
-/// scores close to the frames as rendered.
+/// A bitrate sweep (issue 19 §1, §5): every variant fed raw colour, gffe
+/// and interp also through H.264 at two bitrates generous for the size, in
+/// one pass. The report states each stream (Mbit/s per buffer near its
+/// target, colour PSNR and ꟻLIP, codec times), ties each row to the stream
+/// it was fed, tabulates and plots ꟻLIP against Mbit/s, and generation on
+/// decoded colour scores close to generation on the frames as rendered.
 #[test]
-fn colour_through_h264_is_reported_and_scores_close_to_raw() {
+fn a_bitrate_sweep_reports_each_stream_and_what_generation_made_of_it() {
     let dir = tempfile::tempdir().unwrap();
-    let run_with = |color: &str, name: &str| {
-        let mut c = config(
-            vec![Input::Scene("builtin:crossing".into())],
-            &dir.path().join(name),
-        );
-        c.geometry = protocol::wire::BufferSet::Compact;
-        c.color = color.parse::<video::ColorCodec>().unwrap();
-        c.backends = vec![BackendKind::Cpu];
-        c.only = vec!["gffe".into(), "interp".into()];
-        c.heatmap_inputs = 0;
-        run(&c).unwrap()
-    };
-    let raw = run_with("raw", "raw");
-    let coded = run_with("h264@1", "h264");
-    let stream = &coded.scenes[0].stream;
-    // gffe is fed every other displayed frame (30 fps), interp too.
-    assert_eq!(stream.len(), 1, "{stream:?}");
-    let s = &stream[0];
-    assert_eq!((s.step, s.fps, s.color_codec.as_str()), (2, 30.0, "h264@1"));
-    let color = s.mbit["color"];
-    assert!(color > 0.1 && color < 1.5, "colour at {color} Mbit/s for 1");
-    assert!(s.mbit["depth"] > 0.0 && s.mbit["motion"] > 0.0);
-    let (mean, worst) = s.color_psnr.unwrap();
-    assert!(
-        worst > 30.0 && mean >= worst,
-        "colour PSNR {mean} ({worst})"
+    let mut c = config(vec![Input::Scene("builtin:crossing".into())], dir.path());
+    c.geometry = protocol::wire::BufferSet::Compact;
+    c.colors = ["raw", "h264@1", "h264@3"]
+        .iter()
+        .map(|s| s.parse::<video::ColorCodec>().unwrap())
+        .collect();
+    c.backends = vec![BackendKind::Cpu];
+    c.only = vec!["gffe".into(), "interp".into()];
+    c.heatmap_inputs = 0;
+    let report = run(&c).unwrap();
+    let scene = &report.scenes[0];
+    // gffe and interp are fed every other displayed frame (30 fps): one
+    // stream per colour setting, in the order given.
+    let settings: Vec<(usize, f64, &str)> = scene
+        .stream
+        .iter()
+        .map(|s| (s.step, s.fps, s.setting.as_str()))
+        .collect();
+    assert_eq!(
+        settings,
+        [(2, 30.0, "raw"), (2, 30.0, "h264@1"), (2, 30.0, "h264@3")]
     );
-    assert!(s.color_ms.is_some_and(|(e, d)| e > 0.0 && d > 0.0));
-    assert!(s.color_flip.is_some_and(|f| f > 0.0 && f < 0.1), "{s:?}");
-    assert!(raw.scenes[0].stream[0].color_psnr.is_none());
-    let md = std::fs::read_to_string(dir.path().join("h264/report.md")).unwrap();
-    assert!(md.contains("## Stream codecs"), "{md}");
-    for (a, b) in raw.scenes[0].rows.iter().zip(&coded.scenes[0].rows) {
-        assert_eq!(a.label, b.label);
-        let (qa, qb) = (&a.quality, &b.quality);
+    let [raw, low, high] = [&scene.stream[0], &scene.stream[1], &scene.stream[2]];
+    assert!(raw.color_psnr.is_none() && raw.color_ms.is_none());
+    for (s, target) in [(low, 1.0), (high, 3.0)] {
+        let color = s.mbit["color"];
         assert!(
-            (qa.flip - qb.flip).abs() <= 0.02 && qb.flip.is_finite(),
-            "{}: {qa:?} vs {qb:?}",
-            a.label
+            color > 0.1 * target && color < 1.5 * target,
+            "colour at {color} Mbit/s for {target}"
         );
+        assert!(s.mbit["depth"] > 0.0 && s.mbit["motion"] > 0.0);
+        let (mean, worst) = s.color_psnr.unwrap();
+        assert!(
+            worst > 30.0 && mean >= worst,
+            "colour PSNR {mean} ({worst})"
+        );
+        assert!(s.color_ms.is_some_and(|(e, d)| e > 0.0 && d > 0.0));
+        assert!(s.color_flip.is_some_and(|f| f > 0.0 && f < 0.1), "{s:?}");
+        // The same depth and motion as the raw stream's.
+        assert_eq!(s.mbit["depth"], raw.mbit["depth"]);
+    }
+    assert!(high.mbit["color"] > low.mbit["color"]);
+    assert!(high.color_flip < low.color_flip, "{low:?} {high:?}");
+    // Each row names its colour and the Mbit/s of the stream it was fed.
+    let row = |label: &str| {
+        scene
+            .rows
+            .iter()
+            .find(|r| r.label == label)
+            .unwrap_or_else(|| panic!("no row {label}"))
+    };
+    for m in ["gffe", "interp"] {
+        let plain = row(m);
+        assert_eq!(plain.color_codec, "raw");
+        assert_eq!(plain.stream_mbit, Some(raw.total_mbit));
+        for s in [low, high] {
+            let coded = row(&format!("{m} {}", s.setting));
+            assert_eq!(coded.color_codec, s.setting);
+            assert_eq!(coded.stream_mbit, Some(s.total_mbit));
+            let (qa, qb) = (&plain.quality, &coded.quality);
+            assert!(
+                (qa.flip - qb.flip).abs() <= 0.02 && qb.flip.is_finite(),
+                "{}: {qa:?} vs {qb:?}",
+                coded.label
+            );
+        }
+    }
+    let points = client::eval::report::bitrate(scene);
+    assert_eq!(points.len(), 3);
+    assert!(points.iter().all(|p| p.flip.iter().all(Option::is_some)));
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(md.contains("## Stream codecs"), "{md}");
+    assert!(
+        md.contains("## Bitrate: generated frames against Mbit/s"),
+        "{md}"
+    );
+    assert!(md.contains("| crossing | h264@3 |"), "{md}");
+    // The plot, where a font exists to draw it.
+    if std::path::Path::new("/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf").exists() {
+        let plot = image::open(dir.path().join("plots/bitrate.png")).unwrap();
+        assert_eq!(plot.width(), 3 * 620);
     }
 }

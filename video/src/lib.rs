@@ -127,7 +127,7 @@ impl VideoSettings {
 /// A stream's colour codec as a command line names it: `raw` (f16 as
 /// rendered) and `zstd` (lossless) for research; `h264` (4:2:0) or
 /// `h264-444`, at `@MBIT` Mbit/s or, without, at [`AUTO_BITS_PER_PIXEL`].
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ColorCodec {
     /// Uncompressed f16.
     Raw,

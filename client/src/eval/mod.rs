@@ -1,8 +1,10 @@
 //! `client eval`: what accuracy costs in time (issue 8, DESIGN §9).
 //!
 //! A sequence rendered at the display rate (a dump, or a scene rendered on
-//! the fly) is fed to every variant at 1/(n+1) of its rate, motion composed
-//! back to the previous fed frame ([`framegen::decimate::kept`]); each
+//! the fly) is fed to every variant at 1/(n+1) of its rate, with motion to
+//! the previous fed frame: a scene's fed frames are rendered at the fed
+//! rate ([`sequence::Sequence::render_fed`]), a dump's motion is composed
+//! back through the skipped frames ([`framegen::decimate::kept`]); each
 //! generated frame is compared with the rendered frame it stands for:
 //! the skipped frame after the last fed one for the extrapolators, the
 //! skipped frame before it for interpolation. Every variant runs on each
@@ -93,8 +95,10 @@ pub struct EvalConfig {
     /// How fed frames' depth and motion reach the generator: as rendered
     /// (lossless), or through the stream's quantised codecs (compact).
     pub geometry: protocol::wire::BufferSet,
-    /// Colour through H.264 at this setting (issue 19 §1), or as rendered.
-    pub color: video::ColorCodec,
+    /// How fed frames' colour travels (issue 19): every variant through
+    /// the first setting (raw if empty), and gffe and interp through each
+    /// further one ([`variant::with_codecs`], the bitrate sweep).
+    pub colors: Vec<video::ColorCodec>,
     /// Fed frames before scoring starts (history and background warm up).
     pub warmup: usize,
     /// Heat maps for the first this many inputs...
@@ -136,6 +140,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         if index == 0 && rendered {
             variants.extend(variant::resolutions(&config.resolutions));
         }
+        variant::with_codecs(&mut variants, &config.colors, size);
         if !config.only.is_empty() {
             variants.retain(|v| config.only.iter().any(|o| v.label.contains(o.as_str())));
         }
@@ -334,7 +339,7 @@ fn run_group(
         .collect::<anyhow::Result<Vec<_>>>()?;
     let max_step = variants.iter().map(Variant::step).max().unwrap_or(1);
     let mut ring: VecDeque<Step> = VecDeque::with_capacity(2 * max_step);
-    let mut transport = transport::Transport::new(config.geometry, config.color, seq.fps());
+    let mut transport = transport::Transport::new(config.geometry, &config.colors, seq.fps());
     let mut heat: HashMap<usize, Vec<heatmap::Capture>> = HashMap::new();
     let mut r = 0usize;
     while let Some(step) = seq.next_step()? {
@@ -344,9 +349,9 @@ fn run_group(
         }
         // ring holds sequence positions r + 1 − len ..= r.
         let at = |k: usize| &ring[ring.len() - 1 - (r - k)];
-        // Shared by the variants of this step: the fed frame per step size,
-        // the display-encoded truth per position.
-        let mut kept: HashMap<usize, Arc<Frame>> = HashMap::new();
+        // Shared by the variants of this step: the fed frame per step size
+        // and colour setting, the display-encoded truth per position.
+        let mut kept: HashMap<(usize, video::ColorCodec), Arc<Frame>> = HashMap::new();
         let mut truths: HashMap<usize, Arc<protocol::display::DisplayImage>> = HashMap::new();
         // What each variant generated this step, scored once all are in.
         let mut pending = Vec::new();
@@ -361,7 +366,8 @@ fn run_group(
                 continue;
             }
             let m = r + 1 - s;
-            let fed = match kept.get(&s) {
+            let color = run.variant.color;
+            let fed = match kept.get(&(s, color)) {
                 Some(fed) => fed.clone(),
                 None => {
                     let skipped: Vec<&Frame> = if m >= s {
@@ -369,12 +375,23 @@ fn run_group(
                     } else {
                         Vec::new()
                     };
-                    let fed = framegen::decimate::kept(&at(m).fed, &skipped, s);
+                    // A scene's fed frame is rendered at the fed rate, as
+                    // a server at that rate renders it; a dump's motion is
+                    // composed through the skipped frames. Composition
+                    // takes a vector from the wrong surface along moving
+                    // edges (crossing at 96×54: 15–20 pixels a frame off by
+                    // over half a pixel) and, coded, costs ten times the
+                    // bits of rendered motion (720p).
+                    let direct = seq.render_fed(at(m).fed.meta.index, s)?;
+                    let fed = match direct {
+                        Some(frame) => framegen::decimate::kept(&frame, &[], s),
+                        None => framegen::decimate::kept(&at(m).fed, &skipped, s),
+                    };
                     // Through the stream's codecs, coded against the fed
                     // frame before it, as a server at this rate sends it.
                     let previous = (m >= s).then(|| &at(m - s).fed.meta);
-                    let fed = Arc::new(transport.carry(fed, previous, s)?);
-                    kept.insert(s, fed.clone());
+                    let fed = Arc::new(transport.carry(fed, previous, s, color)?);
+                    kept.insert((s, color), fed.clone());
                     fed
                 }
             };
@@ -516,21 +533,23 @@ fn run_group(
         r += 1;
     }
     let render = seq.render_cost();
+    let stream = transport.costs();
     let rows = runs
         .into_iter()
         .map(|run| {
             let mut row = Row::new(run.variant, run.quality.finish(), run.timing, run.agreement);
             row.render = render;
+            // The stream this variant was fed, when it was coded.
+            row.stream_mbit = stream
+                .iter()
+                .find(|c| c.step == run.variant.step() && c.setting == row.color_codec)
+                .map(|c| c.total_mbit);
             row
         })
         .collect();
     let mut heat: Vec<_> = heat.into_iter().collect();
     heat.sort_by_key(|(k, _)| *k);
-    Ok(GroupOutput {
-        rows,
-        stream: transport.costs(),
-        heat,
-    })
+    Ok(GroupOutput { rows, stream, heat })
 }
 
 #[cfg(test)]

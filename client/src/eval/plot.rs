@@ -2,7 +2,10 @@
 //! per scene with a panel per backend, every variant a point coloured by
 //! method (grey repeat, blue reproject, red gffe, green interp; rings add
 //! latency), the zero-latency Pareto front drawn as a line, points on
-//! either front labelled; plus `summary.png`, the means over scenes.
+//! either front labelled; plus `summary.png`, the means over scenes; and,
+//! for a bitrate sweep, `bitrate.png`: ꟻLIP against Mbit/s (log scale),
+//! a panel each for the decoded colour, gffe and interp, a line per scene
+//! and their mean.
 //!
 //! Text needs a TrueType font: the first of a few system paths (DejaVu
 //! Sans, which `.ci/run` installs) is registered with `plotters`' ab_glyph
@@ -14,8 +17,8 @@ use std::sync::OnceLock;
 use plotters::prelude::*;
 
 use super::BackendKind;
-use super::report::{Report, Row, pareto, plot_name};
-use super::variant::Axis;
+use super::report::{BitratePoint, Report, Row, pareto, plot_name};
+use super::variant::{Axis, CODEC_METHODS};
 
 const FONT_PATHS: [&str; 3] = [
     "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
@@ -122,6 +125,175 @@ pub fn write_all(report: &Report, out: &Path) -> anyhow::Result<()> {
         let title = format!("mean over {} scenes (n = 1)", report.scenes.len());
         draw(&dir.join("summary.png"), &title, &panels)?;
     }
+    bitrate_plot(report, &dir.join("bitrate.png"))?;
+    Ok(())
+}
+
+/// A line of the bitrate plot: (Mbit/s, ꟻLIP, setting) per point.
+type Line = Vec<(f64, f64, String)>;
+
+/// `bitrate.png` when some scene swept colour settings: per panel (the
+/// decoded colour, then each of [`CODEC_METHODS`]) a thin line per scene
+/// and, over several scenes, their mean in black with the settings named.
+fn bitrate_plot(report: &Report, path: &Path) -> anyhow::Result<()> {
+    let sweeps = report.bitrate_sweeps();
+    if sweeps.is_empty() {
+        return Ok(());
+    }
+    // Panels: the decoded colour (None), then each method (Some(i)).
+    let value = |p: &BitratePoint, panel: Option<usize>| match panel {
+        None => p.color_flip,
+        Some(i) => p.flip[i],
+    };
+    let names = std::iter::once("decoded colour").chain(CODEC_METHODS.iter().map(|m| m.name()));
+    let panels: Vec<(&str, Vec<(String, Line)>)> = names
+        .zip(std::iter::once(None).chain((0..CODEC_METHODS.len()).map(Some)))
+        .map(|(name, panel)| {
+            let mut lines: Vec<(String, Line)> = sweeps
+                .iter()
+                .map(|(scene, points)| {
+                    // Each line runs from the cheapest stream to the dearest.
+                    let mut l: Line = points
+                        .iter()
+                        .filter_map(|p| Some((p.mbit?, value(p, panel)?, p.setting.clone())))
+                        .filter(|(m, f, _)| *m > 0.0 && f.is_finite())
+                        .collect();
+                    l.sort_by(|a, b| a.0.total_cmp(&b.0));
+                    (scene.to_string(), l)
+                })
+                .filter(|(_, l)| !l.is_empty())
+                .collect();
+            if lines.len() > 1 {
+                lines.push(("mean".into(), mean_line(&lines)));
+            }
+            (name, lines)
+        })
+        .collect();
+    let (w, h) = (620u32, 480u32);
+    let cols = panels.len() as u32;
+    let mut buf = vec![255u8; (w * cols * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w * cols, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_err)?;
+        for (area, (name, lines)) in root.split_evenly((1, cols as usize)).iter().zip(&panels) {
+            draw_bitrate_panel(area, name, lines)?;
+        }
+        root.present().map_err(plot_err)?;
+    }
+    let img = image::RgbImage::from_raw(w * cols, h, buf)
+        .ok_or_else(|| anyhow::anyhow!("plot buffer size"))?;
+    img.save(path)?;
+    Ok(())
+}
+
+/// The mean over lines that name the same settings in the same order
+/// (every scene is fed the same ones); settings some line lacks are left
+/// out.
+fn mean_line(lines: &[(String, Line)]) -> Line {
+    let Some((_, first)) = lines.first() else {
+        return Vec::new();
+    };
+    let mut mean: Line = first
+        .iter()
+        .filter_map(|(_, _, setting)| {
+            let at: Vec<(f64, f64)> = lines
+                .iter()
+                .filter_map(|(_, l)| l.iter().find(|p| &p.2 == setting).map(|p| (p.0, p.1)))
+                .collect();
+            (at.len() == lines.len()).then(|| {
+                let n = at.len() as f64;
+                (
+                    at.iter().map(|p| p.0).sum::<f64>() / n,
+                    at.iter().map(|p| p.1).sum::<f64>() / n,
+                    setting.clone(),
+                )
+            })
+        })
+        .collect();
+    mean.sort_by(|a, b| a.0.total_cmp(&b.0));
+    mean
+}
+
+fn draw_bitrate_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    lines: &[(String, Line)],
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let all = || lines.iter().flat_map(|(_, l)| l);
+    let lo_x = all().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    let hi_x = all().map(|p| p.0).fold(0.0, f64::max);
+    let hi_y = all().map(|p| p.1).fold(0.0, f64::max);
+    if !lo_x.is_finite() || hi_x <= 0.0 {
+        return Ok(());
+    }
+    let mut chart = ChartBuilder::on(area)
+        .caption(format!("{title}: FLIP against Mbit/s"), ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(
+            (lo_x / 1.3..hi_x * 1.3).log_scale(),
+            0.0..(hi_y * 1.15).max(1e-4),
+        )
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .max_light_lines(1)
+        .x_labels(6)
+        .x_desc("Mbit/s, all buffers (log)")
+        .y_desc("mean FLIP (lower is better)")
+        .label_style(("sans-serif", 13))
+        .draw()
+        .map_err(plot_err)?;
+    let several = lines.len() > 1;
+    for (i, (name, line)) in lines.iter().enumerate() {
+        let mean = several && name == "mean";
+        let color = if mean {
+            BLACK.to_rgba()
+        } else {
+            Palette99::pick(i).to_rgba()
+        };
+        let width = if mean { 3 } else { 1 };
+        chart
+            .draw_series(LineSeries::new(
+                line.iter().map(|p| (p.0, p.1)),
+                ShapeStyle::from(&color).stroke_width(width),
+            ))
+            .map_err(plot_err)?
+            .label(name.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(width))
+            });
+        chart
+            .draw_series(
+                line.iter()
+                    .map(|p| Circle::new((p.0, p.1), 3, color.filled())),
+            )
+            .map_err(plot_err)?;
+        // The settings named once: on the mean, or on the only line.
+        if mean || !several {
+            chart
+                .draw_series(line.iter().map(|p| {
+                    Text::new(
+                        format!(" {}", p.2),
+                        (p.0, p.1),
+                        ("sans-serif", 13).into_font().color(&BLACK),
+                    )
+                }))
+                .map_err(plot_err)?;
+        }
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK.mix(0.3))
+        .label_font(("sans-serif", 11))
+        .draw()
+        .map_err(plot_err)?;
     Ok(())
 }
 

@@ -17,7 +17,7 @@ use serde::Serialize;
 use super::measure::{Quality, RegionQuality};
 use super::sequence::{RenderCost, RenderOrigin};
 use super::timing::{CopyFloor, Timing, TimingAcc};
-use super::variant::{Axis, EVERY_STAGE, Variant, window_name};
+use super::variant::{Axis, CODEC_METHODS, EVERY_STAGE, Variant, window_name};
 use super::{BackendKind, EvalConfig};
 
 /// Everything an `eval` run measured.
@@ -98,6 +98,11 @@ pub struct Row {
     pub window: &'static str,
     /// `WxH`.
     pub size: String,
+    /// How its fed frames' colour travelled (`raw`, `h264@8`, ...).
+    pub color_codec: String,
+    /// All buffers of the stream it was fed, Mbit/s at the fed rate;
+    /// `None` when frames were fed as rendered.
+    pub stream_mbit: Option<f64>,
     /// Render intervals of added latency.
     pub added_latency_frames: u32,
     /// Quality against ground truth.
@@ -137,6 +142,8 @@ impl Row {
             resample: s.resample.name(),
             window: window_name(v.window),
             size: format!("{}x{}", v.size.width, v.size.height),
+            color_codec: v.color.to_string(),
+            stream_mbit: None,
             added_latency_frames: v.added_latency_frames(),
             quality,
             timing: timing.iter().map(TimingAcc::finish).collect(),
@@ -171,6 +178,69 @@ impl Row {
             ""
         }
     }
+}
+
+/// One colour setting of a bitrate sweep in one scene (issue 19 §5).
+#[derive(Clone, Debug)]
+pub struct BitratePoint {
+    /// The colour setting as given (`raw`, `h264@8`, ...).
+    pub setting: String,
+    /// The fed stream's Mbit/s, all buffers; `None` when not coded.
+    pub mbit: Option<f64>,
+    /// The decoded colour's mean ꟻLIP against the rendered (video codecs).
+    pub color_flip: Option<f64>,
+    /// The colour codec's median encode and decode ms per frame.
+    pub color_ms: Option<(f64, f64)>,
+    /// Mean ꟻLIP of each of [`CODEC_METHODS`] fed that stream.
+    pub flip: [Option<f64>; 2],
+}
+
+/// The bitrate sweep of a scene: per colour setting, in the order given,
+/// what its stream cost and what [`CODEC_METHODS`] made of it (n = 1, the
+/// main size); empty unless more than one setting was fed.
+pub fn bitrate(scene: &SceneReport) -> Vec<BitratePoint> {
+    let Some(size) = scene.rows.first().map(|r| r.size.as_str()) else {
+        return Vec::new();
+    };
+    let rows: Vec<&Row> = scene
+        .rows
+        .iter()
+        .filter(|r| r.size == size && r.n == 1 && r.window == "off")
+        .filter(|r| match r.axis {
+            Axis::Method => r.label == r.method,
+            Axis::Codec => true,
+            _ => false,
+        })
+        .collect();
+    let mut settings: Vec<&str> = Vec::new();
+    for r in &rows {
+        if !settings.contains(&r.color_codec.as_str()) {
+            settings.push(&r.color_codec);
+        }
+    }
+    if settings.len() < 2 {
+        return Vec::new();
+    }
+    settings
+        .into_iter()
+        .map(|setting| {
+            let of = |m: framegen::Method| {
+                rows.iter()
+                    .find(|r| r.method == m.name() && r.color_codec == setting)
+            };
+            let stream = scene
+                .stream
+                .iter()
+                .find(|c| c.step == 2 && c.setting == setting);
+            BitratePoint {
+                setting: setting.to_string(),
+                mbit: stream.map(|c| c.total_mbit),
+                color_flip: stream.and_then(|c| c.color_flip),
+                color_ms: stream.and_then(|c| c.color_ms),
+                flip: CODEC_METHODS.map(|m| of(m).map(|r| r.quality.flip)),
+            }
+        })
+        .collect()
 }
 
 /// Indices of the Pareto-optimal points (minimise both coordinates).
@@ -268,7 +338,6 @@ impl Report {
         Ok(())
     }
 
-    /// The Markdown report.
     /// The streams' costs, when fed frames went through the stream's codecs
     /// (`--geometry compact`, `--color-codec`).
     fn streams(&self, md: &mut String) {
@@ -316,6 +385,70 @@ impl Report {
         }
     }
 
+    /// Each scene's bitrate sweep ([`bitrate`]), the scenes without one
+    /// left out.
+    pub fn bitrate_sweeps(&self) -> Vec<(&str, Vec<BitratePoint>)> {
+        self.scenes
+            .iter()
+            .map(|s| (s.scene.as_str(), bitrate(s)))
+            .filter(|(_, b)| !b.is_empty())
+            .collect()
+    }
+
+    /// The bitrate sweep (`--color-codec` with several settings): per
+    /// scene and setting, the stream's Mbit/s and what generation made of
+    /// it, against the first setting.
+    fn bitrates(&self, md: &mut String) {
+        let sweeps = self.bitrate_sweeps();
+        if sweeps.is_empty() {
+            return;
+        }
+        let names: Vec<&str> = CODEC_METHODS.iter().map(|m| m.name()).collect();
+        let _ = writeln!(md, "\n## Bitrate: generated frames against Mbit/s\n");
+        let _ = writeln!(
+            md,
+            "![ꟻLIP against Mbit/s](plots/bitrate.png)\n\n\
+             {} fed (n = 1) through each colour setting; Mbit/s of all buffers at the fed rate; in brackets, \
+             the change from the first setting. Colour ms: the colour codec's median encode / decode per frame.\n",
+            names.join(" and ")
+        );
+        let _ = write!(md, "| scene | colour | Mbit/s | colour ꟻLIP |");
+        for n in &names {
+            let _ = write!(md, " {n} ꟻLIP |");
+        }
+        let _ = writeln!(md, " colour ms |");
+        let _ = writeln!(md, "|---|---|---|---|{}---|", "---|".repeat(names.len()));
+        for (scene, points) in &sweeps {
+            let base = &points[0];
+            for p in points {
+                let _ = write!(
+                    md,
+                    "| {scene} | {} | {} | {} |",
+                    p.setting,
+                    p.mbit.map_or("—".into(), |v| format!("{v:.2}")),
+                    p.color_flip.map_or("—".into(), |v| format!("{v:.4}"))
+                );
+                for (f, b) in p.flip.iter().zip(&base.flip) {
+                    let cell = match (f, b) {
+                        (Some(f), Some(b)) if !std::ptr::eq(p, base) => {
+                            format!("{f:.4} ({:+.4})", f - b)
+                        }
+                        (Some(f), _) => format!("{f:.4}"),
+                        _ => "—".into(),
+                    };
+                    let _ = write!(md, " {cell} |");
+                }
+                let _ = writeln!(
+                    md,
+                    " {} |",
+                    p.color_ms
+                        .map_or("—".into(), |(e, d)| format!("{e:.2} / {d:.2}"))
+                );
+            }
+        }
+    }
+
+    /// The Markdown report.
     pub fn markdown(&self) -> String {
         let mut md = String::new();
         let _ = writeln!(md, "# Frame generation: accuracy against time\n");
@@ -379,6 +512,7 @@ impl Report {
         self.summary(&mut md);
         self.plans(&mut md);
         self.streams(&mut md);
+        self.bitrates(&mut md);
         for scene in &self.scenes {
             self.scene_section(&mut md, scene);
         }

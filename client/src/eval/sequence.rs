@@ -175,6 +175,34 @@ impl Sequence {
         })
     }
 
+    /// Frame `index` to feed as a server rendering every `step`th displayed
+    /// frame renders it: its motion points `step` frames back, to the
+    /// previous frame that server rendered (so a stream's motion costs
+    /// what it costs live), and a cut between the two shows as one.
+    /// `None` for a dump, whose frames were rendered at the display rate
+    /// only (their motion is composed instead, [`framegen::decimate`]), or
+    /// for `step` ≤ 1. Not counted in the render cost (a live server
+    /// renders each frame once).
+    pub fn render_fed(&mut self, index: u64, step: usize) -> anyhow::Result<Option<Frame>> {
+        let Source::Rendered { plain, windowed } = &mut self.source else {
+            return Ok(None);
+        };
+        if step <= 1 {
+            return Ok(None);
+        }
+        let renderer = windowed.as_mut().unwrap_or(plain);
+        let step = step as u64;
+        let time = |k: u64| k as f64 / self.fps;
+        let back = index.saturating_sub(step);
+        let frame = renderer.render_at(
+            index,
+            time(index),
+            time(back),
+            time(back.saturating_sub(step)),
+        )?;
+        Ok(Some(frame))
+    }
+
     /// The next step, `None` at the end.
     pub fn next_step(&mut self) -> anyhow::Result<Option<Step>> {
         if self.next >= self.end {

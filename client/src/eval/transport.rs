@@ -3,12 +3,13 @@
 //! stream's codecs, coded against the fed frame before it (the previous
 //! frame a server at the fed rate would send); with a colour codec
 //! (`eval --color-codec h264@12`), colour goes through libx264 and FFmpeg's
-//! decoder, one encoder per fed rate, as a stream at that rate would.
-//! Without either, frames pass as rendered.
+//! decoder, one encoder per fed rate and colour setting, as a stream at
+//! that rate would. Frames pass as rendered only when nothing is coded:
+//! lossless geometry and one colour setting, `raw`.
 //!
-//! Each fed rate's stream keeps its costs: bytes per buffer (Mbit/s at the
-//! fed rate), the decoded colour's display-space PSNR against the rendered,
-//! and encode and decode wall time.
+//! Each stream (fed rate and colour setting) keeps its costs: bytes per
+//! buffer (Mbit/s at the fed rate), the decoded colour's display-space PSNR
+//! and ꟻLIP against the rendered, and encode and decode wall time.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -25,17 +26,21 @@ use video::{ColorCodec, ColorDecoder, ColorEncoder};
 
 /// The stream's codecs between the renderer and the generator.
 pub struct Transport {
-    buffers: [StreamBuffer; 3],
+    set: BufferSet,
     /// Whether frames are coded at all.
     coded: bool,
-    color: ColorCodec,
+    /// The colour settings, in the order the command line gave them (the
+    /// order of [`Transport::costs`] within a fed rate).
+    colors: Vec<ColorCodec>,
     /// Display rate; a stream fed every `step`th frame runs at `fps / step`.
     fps: f64,
-    streams: BTreeMap<usize, Stream>,
+    /// Per (step, index into `colors`).
+    streams: BTreeMap<(usize, usize), Stream>,
 }
 
-/// One fed rate's codec state and tallies.
+/// One stream's codec state and tallies: one fed rate, one colour setting.
 struct Stream {
+    buffers: [StreamBuffer; 3],
     color: Option<(ColorEncoder, ColorDecoder)>,
     frames: u64,
     bytes: BTreeMap<&'static str, u64>,
@@ -87,7 +92,8 @@ impl<T: ColorStreamDecoder> ColorStreamDecoder for Timed<'_, T> {
     }
 }
 
-/// What one fed rate's stream cost (`report.json`'s `scenes[].stream`).
+/// What one stream (fed rate and colour setting) cost (`report.json`'s
+/// `scenes[].stream`).
 #[derive(Clone, Debug, Serialize)]
 pub struct StreamCost {
     /// Frames per second of the stream (the display rate / the step).
@@ -96,7 +102,10 @@ pub struct StreamCost {
     pub step: usize,
     /// Frames coded.
     pub frames: u64,
-    /// The colour codec (`raw` when colour is not video-coded).
+    /// The colour setting as given (`raw`, `h264@8`, `h264`, ...): what
+    /// a variant's [`Variant::color`](super::variant::Variant::color) names.
+    pub setting: String,
+    /// The colour codec as run (the automatic rate resolved to Mbit/s).
     pub color_codec: String,
     /// Mbit/s of each buffer at the stream's rate (`color`, `depth`, `motion`).
     pub mbit: BTreeMap<&'static str, f64>,
@@ -131,36 +140,51 @@ fn median_ms(v: &[Duration]) -> f64 {
 }
 
 impl Transport {
-    /// Fed frames through `set`'s depth and motion codecs and, with
-    /// `color`, colour through H.264 at that setting; `fps` is the display
-    /// rate.
-    pub fn new(set: BufferSet, color: ColorCodec, fps: f64) -> Self {
-        let video = color.codec() == Codec::H264;
+    /// Fed frames through `set`'s depth and motion codecs and colour
+    /// through each of `colors` (a stream each); `fps` is the display rate.
+    pub fn new(set: BufferSet, colors: &[ColorCodec], fps: f64) -> Self {
+        let mut unique: Vec<ColorCodec> = Vec::new();
+        for &c in colors {
+            if !unique.contains(&c) {
+                unique.push(c);
+            }
+        }
         Self {
-            buffers: set.buffers(if video { Codec::H264 } else { Codec::Raw }),
-            coded: set == BufferSet::Compact || video,
-            color,
+            set,
+            coded: set == BufferSet::Compact || unique.iter().any(|&c| c != ColorCodec::Raw),
+            colors: unique,
             fps,
             streams: BTreeMap::new(),
         }
     }
 
     /// `frame` as a client decodes it, when it is fed every `step`th
-    /// displayed frame and `previous` was the frame sent before it.
+    /// displayed frame with its colour through `color` (one of the
+    /// settings given to [`Transport::new`]) and `previous` was the frame
+    /// sent before it.
     pub fn carry(
         &mut self,
         mut frame: Frame,
         previous: Option<&FrameMeta>,
         step: usize,
+        color: ColorCodec,
     ) -> anyhow::Result<Frame> {
         if !self.coded {
             return Ok(frame);
         }
+        let which = self
+            .colors
+            .iter()
+            .position(|&c| c == color)
+            .ok_or_else(|| {
+                anyhow::anyhow!("colour setting {color} was not given to the transport")
+            })?;
         let fps = self.fps / step.max(1) as f64;
-        let stream = match self.streams.entry(step) {
+        let stream = match self.streams.entry((step, which)) {
             std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::btree_map::Entry::Vacant(e) => e.insert(Stream {
-                color: match self.color.settings(frame.meta.size, fps) {
+                buffers: self.set.buffers(color.codec()),
+                color: match color.settings(frame.meta.size, fps) {
                     Some(s) => Some((ColorEncoder::new(s, fps)?, ColorDecoder::new()?)),
                     None => None,
                 },
@@ -182,7 +206,7 @@ impl Transport {
                 let encoded = encode_frame_with(
                     &frame,
                     previous,
-                    &self.buffers,
+                    &stream.buffers,
                     DEFAULT_ZSTD_LEVEL,
                     Some(&mut timed),
                 )?;
@@ -195,7 +219,7 @@ impl Transport {
             }
             None => {
                 let encoded =
-                    encode_frame_after(&frame, previous, &self.buffers, DEFAULT_ZSTD_LEVEL)?;
+                    encode_frame_after(&frame, previous, &stream.buffers, DEFAULT_ZSTD_LEVEL)?;
                 stream.encode.push(started.elapsed());
                 let started = Instant::now();
                 let decoded = encoded.decode()?;
@@ -230,13 +254,14 @@ impl Transport {
         Ok(frame)
     }
 
-    /// What each fed rate's stream cost so far, slowest rate first.
+    /// What each stream cost so far: slowest fed rate first, colour
+    /// settings in the order given.
     pub fn costs(&self) -> Vec<StreamCost> {
-        self.streams
-            .iter()
-            .rev()
-            .filter(|(_, s)| s.frames > 0)
-            .map(|(&step, s)| {
+        let mut streams: Vec<_> = self.streams.iter().filter(|(_, s)| s.frames > 0).collect();
+        streams.sort_by_key(|((step, which), _)| (std::cmp::Reverse(*step), *which));
+        streams
+            .into_iter()
+            .map(|(&(step, which), s)| {
                 let fps = self.fps / step.max(1) as f64;
                 let mbit: BTreeMap<&'static str, f64> = s
                     .bytes
@@ -247,8 +272,9 @@ impl Transport {
                     fps,
                     step,
                     frames: s.frames,
+                    setting: self.colors[which].to_string(),
                     color_codec: s.color.as_ref().map_or_else(
-                        || self.color.to_string(),
+                        || self.colors[which].to_string(),
                         |(encoder, _)| encoder.settings().to_string(),
                     ),
                     total_mbit: mbit.values().sum(),

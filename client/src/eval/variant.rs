@@ -6,6 +6,7 @@ use framegen::{Method, Resample, Settings};
 use protocol::FrameSize;
 use protocol::wire::WindowMode;
 use serde::Serialize;
+use video::ColorCodec;
 
 /// What a variant changes relative to its method's defaults.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -34,6 +35,9 @@ pub enum Axis {
     N,
     /// Rendered (and displayed) resolution.
     Resolution,
+    /// The stream's colour codec and bitrate (issue 19 §5): gffe and
+    /// interp fed through each further setting of `--color-codec`.
+    Codec,
 }
 
 impl Axis {
@@ -51,6 +55,7 @@ impl Axis {
             Axis::Window => "adaptive window",
             Axis::N => "generated frames per rendered frame n",
             Axis::Resolution => "resolution",
+            Axis::Codec => "colour codec and bitrate (gffe, interp)",
         }
     }
 }
@@ -96,6 +101,8 @@ pub struct Variant {
     /// Runs every stage: the stream's effects are not applied
     /// ([`for_stream`]).
     pub every_stage: bool,
+    /// How the fed frames' colour travels ([`with_codecs`]).
+    pub color: ColorCodec,
 }
 
 impl Variant {
@@ -108,6 +115,7 @@ impl Variant {
             size,
             oracle: false,
             every_stage: false,
+            color: ColorCodec::Raw,
         }
     }
 
@@ -246,6 +254,39 @@ pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
     out
 }
 
+/// The methods [`with_codecs`] feeds through each further colour setting:
+/// the extrapolator and the interpolator the issue measures (19 §5).
+pub const CODEC_METHODS: [Method; 2] = [Method::Gffe, Method::Interp];
+
+/// Feeds every variant colour through `codecs[0]` (raw if empty) and adds
+/// [`CODEC_METHODS`] at their defaults at `size` through each further
+/// setting, labelled `gffe h264@8`: one axis around the defaults, as the
+/// other knobs are swept.
+pub fn with_codecs(variants: &mut Vec<Variant>, codecs: &[ColorCodec], size: FrameSize) {
+    let first = codecs.first().copied().unwrap_or(ColorCodec::Raw);
+    for v in variants.iter_mut() {
+        v.color = first;
+    }
+    let mut seen = vec![first];
+    for &codec in codecs.iter().skip(1) {
+        if seen.contains(&codec) {
+            continue;
+        }
+        seen.push(codec);
+        for m in CODEC_METHODS {
+            variants.push(Variant {
+                color: codec,
+                ..Variant::new(
+                    Axis::Codec,
+                    format!("{m} {codec}"),
+                    Settings::for_method(m),
+                    size,
+                )
+            });
+        }
+    }
+}
+
 /// The methods at their defaults at each extra resolution.
 pub fn resolutions(sizes: &[FrameSize]) -> Vec<Variant> {
     sizes
@@ -318,5 +359,36 @@ mod tests {
                 .iter()
                 .any(|v| v.axis == Axis::Window)
         );
+    }
+
+    #[test]
+    fn further_colour_settings_add_gffe_and_interp_rows() {
+        let size = FrameSize::new(64, 36);
+        let codecs: Vec<ColorCodec> = ["raw", "h264@4", "h264@16", "h264@4"]
+            .iter()
+            .map(|c| c.parse().unwrap())
+            .collect();
+        let mut all = sweep(Sweep::Methods, size, true);
+        let before = all.len();
+        with_codecs(&mut all, &codecs, size);
+        // Every swept variant on the first setting; the repeated one once.
+        assert!(all[..before].iter().all(|v| v.color == ColorCodec::Raw));
+        let added: Vec<(&str, ColorCodec)> = all[before..]
+            .iter()
+            .map(|v| (v.label.as_str(), v.color))
+            .collect();
+        assert_eq!(
+            added,
+            [
+                ("gffe h264@4", codecs[1]),
+                ("interp h264@4", codecs[1]),
+                ("gffe h264@16", codecs[2]),
+                ("interp h264@16", codecs[2]),
+            ]
+        );
+        for v in &all[before..] {
+            assert_eq!(v.axis, Axis::Codec);
+            assert_eq!(v.settings, Settings::for_method(v.settings.method));
+        }
     }
 }
