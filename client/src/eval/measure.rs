@@ -395,6 +395,36 @@ mod tests {
         assert!(s.psnr < 20.0 && s.flip > 0.05);
     }
 
+    /// What the stream report says of ꟻLIP (`transport::StreamCost::
+    /// color_codes_changed`): it weighs one-code changes of the 8-bit
+    /// display values it compares, so a codec's floor is set by how many
+    /// codes it changes, not by how far.
+    #[test]
+    fn flip_weighs_one_code_changes() {
+        let (w, h) = (160, 90);
+        let code = |v: u32| (v % 256) as f32 / 255.0;
+        let base = image(w, h, |x, y| code(x * 7 + y * 3));
+        let up = |every: u32| {
+            image(w, h, |x, y| {
+                let v = x * 7 + y * 3;
+                // One code up (staying below white) in one pixel of `every`.
+                if (x + y * w) % every == 0 && v % 256 < 255 {
+                    code(v + 1)
+                } else {
+                    code(v)
+                }
+            })
+        };
+        let mean = |t: &DisplayImage| {
+            let v = flip_map(&base, t).to_vec();
+            v.iter().map(|&e| f64::from(e)).sum::<f64>() / v.len() as f64
+        };
+        let (all, tenth) = (mean(&up(1)), mean(&up(10)));
+        assert!((0.02..0.08).contains(&all), "one code up everywhere: {all}");
+        assert!((0.003..0.02).contains(&tenth), "in a tenth: {tenth}");
+        assert!(mean(&base) == 0.0);
+    }
+
     /// A `w`×`h` frame of grey `value(x, y)` (linear), with a dynamic mask
     /// where `dynamic(x, y)`.
     fn frame(

@@ -347,22 +347,23 @@ impl Report {
         let _ = writeln!(md, "\n## Stream codecs\n");
         let _ = writeln!(
             md,
-            "Fed frames went through the stream's codecs before the generator saw them; one stream per fed rate. \
+            "Fed frames went through the stream's codecs before the generator saw them; one stream per fed rate and colour setting. \
              Mbit/s per buffer at the stream's rate; colour PSNR is the decoded against the rendered in display \
-             space (mean, worst frame), and its ꟻLIP; encode and decode are medians over all buffers, of which the colour \
+             space (mean, worst frame), and its ꟻLIP; codes changed: the share of the 8-bit display values ꟻLIP compares \
+             that differ (ꟻLIP weighs even one-code changes: one code up everywhere scores 0.034 on a grey ramp); encode and decode are medians over all buffers, of which the colour \
              codec's in parentheses.\n"
         );
         let _ = writeln!(
             md,
-            "| scene | fps | colour | colour Mbit/s | depth Mbit/s | motion Mbit/s | total Mbit/s | colour PSNR dB | colour ꟻLIP | encode ms | decode ms |"
+            "| scene | fps | colour | colour Mbit/s | depth Mbit/s | motion Mbit/s | total Mbit/s | colour PSNR dB | colour ꟻLIP | codes changed % | encode ms | decode ms |"
         );
-        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|---|");
         for scene in &self.scenes {
             for c in &scene.stream {
                 let mbit = |k: &str| c.mbit.get(k).map_or("—".into(), |v| format!("{v:.2}"));
                 let _ = writeln!(
                     md,
-                    "| {} | {:.1} | {} | {} | {} | {} | {:.2} | {} | {} | {:.2}{} | {:.2}{} |",
+                    "| {} | {:.1} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {:.2}{} | {:.2}{} |",
                     scene.scene,
                     c.fps,
                     c.color_codec,
@@ -374,6 +375,8 @@ impl Report {
                         "{mean:.2} ({worst:.2})"
                     )),
                     c.color_flip.map_or("—".into(), |f| format!("{f:.4}")),
+                    c.color_codes_changed
+                        .map_or("—".into(), |f| format!("{:.1}", 100.0 * f)),
                     c.encode_ms,
                     c.color_ms
                         .map_or(String::new(), |(e, _)| format!(" ({e:.2})")),
