@@ -289,11 +289,14 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
 
 /// The codecs this client decodes: all of protocol's, H.264 only where
 /// libavcodec has its decoder (without it, a server sending video-coded
-/// colour refuses the hello and says why).
+/// colour refuses the hello and says why). libavcodec is probed once per
+/// process, not on every (re)connect.
 fn decodable_codecs() -> Vec<Codec> {
+    static H264: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let h264 = *H264.get_or_init(|| video::ColorDecoder::new().is_ok());
     Codec::ALL
         .into_iter()
-        .filter(|&c| c != Codec::H264 || video::ColorDecoder::new().is_ok())
+        .filter(|&c| c != Codec::H264 || h264)
         .collect()
 }
 

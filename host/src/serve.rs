@@ -19,7 +19,7 @@ use tokio::sync::{Semaphore, broadcast};
 
 use crate::recovery::{Decision, Recovery};
 use crate::session::{self, Policy};
-use crate::source::Feed;
+use crate::source::{Feed, KeyframeRequests};
 use crate::tls::Identity;
 
 /// Most frame streams one client may have open at once.
@@ -309,9 +309,7 @@ async fn connection(
     let mut source = JoinedOffRuntime(subscription.source);
     // The client starts from a keyframe: ask for one now.
     let mut recovery = Recovery::new();
-    if recovery.ask(Instant::now()) {
-        keyframes.request();
-    }
+    ask_keyframe(&mut recovery, &keyframes, Instant::now());
     send.write_all(&wire::encode(&Message::Welcome(welcome))?)
         .await?;
     // A per-session replay paces from here, not from before the welcome:
@@ -348,9 +346,7 @@ async fn connection(
                 client.dropped.fetch_add(n, Ordering::Relaxed);
                 counters.frames_dropped.fetch_add(n, Ordering::Relaxed);
                 recovery.lost();
-                if recovery.ask(now) {
-                    keyframes.request();
-                }
+                ask_keyframe(&mut recovery, &keyframes, now);
                 continue;
             }
             Err(broadcast::error::RecvError::Closed) => {
@@ -367,9 +363,7 @@ async fn connection(
         if recovery.on_frame(frame.keyframe) == Decision::Skip {
             // Predicted from a frame the client does not have.
             client.held_back.fetch_add(1, Ordering::Relaxed);
-            if recovery.ask(now) {
-                keyframes.request();
-            }
+            ask_keyframe(&mut recovery, &keyframes, now);
             continue;
         }
         let Ok(permit) = permits.clone().try_acquire_owned() else {
@@ -377,9 +371,7 @@ async fn connection(
             client.dropped.fetch_add(1, Ordering::Relaxed);
             counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
             recovery.lost();
-            if recovery.ask(now) {
-                keyframes.request();
-            }
+            ask_keyframe(&mut recovery, &keyframes, now);
             continue;
         };
         let conn = conn.clone();
@@ -439,6 +431,15 @@ impl Drop for JoinedOffRuntime {
                 Err(_) => drop(source),
             }
         }
+    }
+}
+
+/// Asks the producer for a keyframe when the session's recovery is due to
+/// ([`Recovery::ask`]: while its client waits for one, at most every
+/// [`crate::recovery::KEYFRAME_RETRY`]).
+fn ask_keyframe(recovery: &mut Recovery, keyframes: &KeyframeRequests, now: Instant) {
+    if recovery.ask(now) {
+        keyframes.request();
     }
 }
 
