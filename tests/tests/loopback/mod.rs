@@ -20,7 +20,8 @@ use protocol::{Codec, Frame, FrameSize};
 pub const SIZE: FrameSize = FrameSize::new(96, 54);
 pub const FRAMES: u64 = 24;
 pub const TOKEN: &str = "let-me-in";
-/// Replay rate of the live-feed fixture. A live feed drops frames for a
+/// Replay rate of the fixture's dump (its frames are timed at this rate,
+/// which is what a replay paces by). A live feed drops frames for a
 /// client that falls behind (by design); 20 fps leaves a loaded 2-core CI
 /// machine, running the other tests in parallel, room to keep up, so the
 /// "every frame arrives" checks test the transport, not the machine.
@@ -38,7 +39,7 @@ pub struct Fixture {
 pub fn write_dump(dir: &std::path::Path) {
     let mut w = DumpWriter::create(dir, Manifest::new(REPLAY_FPS, SIZE, "transport test")).unwrap();
     for i in 0..FRAMES {
-        w.write_frame(&tests::render(i, 60.0, DVec3::ZERO, SIZE))
+        w.write_frame(&tests::render(i, REPLAY_FPS, DVec3::ZERO, SIZE))
             .unwrap();
     }
     w.finish().unwrap();
@@ -127,14 +128,15 @@ impl Fixture {
     }
 
     /// A second server replaying the dump afresh for every session (at
-    /// 60 fps), encoded as `encoding` says; a config to connect to it.
+    /// [`REPLAY_FPS`]), encoded as `encoding` says; a config to connect to
+    /// it.
     pub fn replay_server(&self, encoding: host::source::Encoding) -> (Server, ConnectConfig) {
         let policy = Policy {
             token: TOKEN.into(),
             server_name: "replay".into(),
             size: SIZE,
             max_frame: SIZE,
-            fps: 60.0,
+            fps: REPLAY_FPS,
             buffers: encoding.buffers.clone(),
             window_mode: WindowMode::Off,
             max_sessions: host::session::DEFAULT_MAX_SESSIONS,
