@@ -23,7 +23,7 @@
 //! and NaN keep reserved codes and come back exactly; zero and negative
 //! depths (invalid by DESIGN §3) come back as 0. Codes go through
 //! [`super::planar`]: inverse depth is affine across a flat surface, which
-//! the predictor follows exactly.
+//! the predictor follows to within a residual constant over the surface.
 //!
 //! Payload: tag, the three scale parameters (f64), the plane's width (u32),
 //! then the packed codes. Every parameter is checked before use.

@@ -3,10 +3,12 @@
 //!
 //! Each value is predicted by LOCO-I's median edge detector from its left,
 //! upper and upper-left neighbours (`a`, `b`, `c`): `min(a, b)` or
-//! `max(a, b)` across an edge, `a + b − c` elsewhere. That predictor is exact
-//! on any plane that is affine in the pixel coordinates, which is what
-//! inverse depth is on a flat surface and what motion is on a rigid object
-//! moving parallel to the image; so flat and rigid regions cost almost
+//! `max(a, b)` across an edge, `a + b − c` elsewhere. On a plane that is
+//! affine in the pixel coordinates (what inverse depth is on a flat surface
+//! and motion on a rigid object moving parallel to the image) it is exact
+//! where the two gradients differ in sign or one is zero, and off by the
+//! smaller gradient where they share a sign: the same residual at every
+//! pixel of the plane. Either way flat and rigid regions cost almost
 //! nothing. Residuals wrap in `i32` (lossless for any input), are zigzag
 //! mapped to small unsigned values, split into byte planes and compressed
 //! with zstd (as [`super::Codec::Zstd`] does for floats).
@@ -105,16 +107,20 @@ mod tests {
     #[test]
     fn an_affine_plane_costs_almost_nothing() {
         let (w, h) = (64usize, 48usize);
-        let plane: Vec<i32> = (0..w * h)
-            .map(|i| 1000 + 7 * (i % w) as i32 - 3 * (i / w) as i32)
-            .collect();
-        let packed = pack(&plane, w, 1).unwrap();
-        assert!(
-            packed.len() * 50 < plane.len() * 4,
-            "{} bytes",
-            packed.len()
-        );
-        assert_eq!(unpack(&packed, plane.len(), w).unwrap(), plane);
+        // Gradients of opposite signs (exact) and of the same sign (a
+        // constant residual).
+        for (gx, gy) in [(7, -3), (7, 3)] {
+            let plane: Vec<i32> = (0..w * h)
+                .map(|i| 1000 + gx * (i % w) as i32 + gy * (i / w) as i32)
+                .collect();
+            let packed = pack(&plane, w, 1).unwrap();
+            assert!(
+                packed.len() * 50 < plane.len() * 4,
+                "{} bytes",
+                packed.len()
+            );
+            assert_eq!(unpack(&packed, plane.len(), w).unwrap(), plane);
+        }
     }
 
     #[test]
