@@ -95,10 +95,10 @@ impl EncodedFrame {
     }
 
     /// [`EncodedFrame::decode`], with the stream's colour decoder for a
-    /// codec whose state spans frames ([`codec::stream`]). The decoder sees
-    /// the colour payload before any other buffer is decoded, so it is fed
+    /// codec whose state spans frames ([`codec::stream`]). The decoder runs
+    /// on a thread of its own beside the other buffers' decoding and is fed
     /// every frame whose header and payloads checked out, even when another
-    /// buffer then fails.
+    /// buffer fails; its error is the one returned when both fail.
     pub fn decode_with(
         &self,
         mut color: Option<&mut dyn ColorStreamDecoder>,
@@ -131,44 +131,76 @@ impl EncodedFrame {
                 });
             }
         }
-        // A video stream's decoder first; motion residuals predict from the
-        // decoded depth: they go last.
+        // A video stream's colour is decoded on a thread of its own, beside
+        // the other buffers (its decoder is fed whatever they do); motion
+        // residuals predict from the decoded depth: they go last.
         let mut order: Vec<_> = self.header.buffers.iter().zip(&self.payloads).collect();
         order.sort_by_key(|(desc, _)| match desc.codec {
             Codec::H264 => 0,
             Codec::MotionResidual => 2,
             _ => 1,
         });
-        for (desc, payload) in order {
-            if desc.codec == Codec::H264 {
-                let codec_error = |source| AssembleError::Codec {
-                    kind: desc.kind,
-                    source,
-                };
-                let decoder = color
-                    .as_deref_mut()
-                    .filter(|d| d.codec() == desc.codec && desc.kind == BufferKind::Color)
-                    .ok_or(codec_error(CodecError::Stateful(desc.codec)))?;
-                decoder
-                    .decode_color(&payload.data, meta.size, &mut frame.color)
-                    .map_err(|source| {
-                        codec_error(CodecError::Stream {
-                            codec: desc.codec,
-                            source,
-                        })
-                    })?;
-                continue;
-            }
-            let raw_len = desc.format.raw_len(meta.size);
-            let depth =
-                (frame.depth.len() as u64 == meta.size.pixels()).then_some(&frame.depth[..]);
-            let raw = codec::decode_with(desc.codec, desc.format, &payload.data, raw_len, depth)
-                .map_err(|source| AssembleError::Codec {
-                    kind: desc.kind,
-                    source,
-                })?;
-            frame.set_buffer_bytes(desc.kind, desc.format, &raw)?;
+        let video = order
+            .first()
+            .filter(|(desc, _)| desc.codec == Codec::H264)
+            .copied();
+        let rest = &order[usize::from(video.is_some())..];
+        if let Some((desc, _)) = rest.iter().find(|(desc, _)| desc.codec == Codec::H264) {
+            // A second video-coded buffer: one decoder cannot take both.
+            return Err(AssembleError::Codec {
+                kind: desc.kind,
+                source: CodecError::Stateful(desc.codec),
+            });
         }
+        let mut color_out = Vec::new();
+        let (color_result, others) = std::thread::scope(|scope| {
+            let color_job = video.map(|(desc, payload)| {
+                let decoder = color
+                    .take()
+                    .filter(|d| d.codec() == desc.codec && desc.kind == BufferKind::Color);
+                let out = &mut color_out;
+                let job =
+                    move || match decoder {
+                        None => Err(CodecError::Stateful(desc.codec)),
+                        Some(decoder) => decoder
+                            .decode_color(&payload.data, meta.size, out)
+                            .map_err(|source| CodecError::Stream {
+                                codec: desc.codec,
+                                source,
+                            }),
+                    };
+                (desc.kind, scope.spawn(job))
+            });
+            let others = (|| {
+                for (desc, payload) in rest {
+                    let raw_len = desc.format.raw_len(meta.size);
+                    let depth = (frame.depth.len() as u64 == meta.size.pixels())
+                        .then_some(&frame.depth[..]);
+                    let raw =
+                        codec::decode_with(desc.codec, desc.format, &payload.data, raw_len, depth)
+                            .map_err(|source| AssembleError::Codec {
+                                kind: desc.kind,
+                                source,
+                            })?;
+                    frame.set_buffer_bytes(desc.kind, desc.format, &raw)?;
+                }
+                Ok::<_, AssembleError>(())
+            })();
+            let color_result = color_job.map(|(kind, handle)| {
+                match handle.join() {
+                    Ok(result) => result.map_err(|source| AssembleError::Codec { kind, source }),
+                    // A decoder's panic is a bug: it goes on as one.
+                    Err(panic) => std::panic::resume_unwind(panic),
+                }
+            });
+            (color_result, others)
+        });
+        // The colour's error first: a receiver asks for a keyframe on it.
+        if let Some(result) = color_result {
+            result?;
+            frame.color = color_out;
+        }
+        others?;
         frame.validate(&limits)?;
         Ok(frame)
     }
@@ -206,7 +238,8 @@ pub fn encode_frame_after(
 
 /// [`encode_frame_after`], with the stream's colour encoder for a codec
 /// whose state spans frames ([`codec::stream`]): it is given every frame
-/// this returns, in order.
+/// this returns, in order, and codes it on a thread of its own beside the
+/// other buffers.
 pub fn encode_frame_with(
     frame: &Frame,
     previous: Option<&FrameMeta>,
@@ -230,11 +263,14 @@ pub fn encode_frame_with(
         Some(codes) if residual => Cow::Owned(quantizer.depths(codes)),
         _ => Cow::Borrowed(&frame.depth),
     };
-    let mut descs = Vec::with_capacity(buffers.len());
-    let mut payloads = Vec::with_capacity(buffers.len());
     for b in buffers {
         b.validate()?;
-        let data = match b.codec {
+    }
+    // A video-coded colour buffer is encoded on a thread of its own, beside
+    // the other buffers.
+    let video = buffers.iter().position(|b| b.codec == Codec::H264);
+    let encode = |b: &StreamBuffer| -> Result<Vec<u8>, AssembleError> {
+        let coded = match b.codec {
             Codec::QuantDepth => match &codes {
                 Some(codes) => depth::encode_codes(&quantizer, codes, width, level),
                 None => depth::encode(&quantizer, &frame.depth, width, level),
@@ -244,25 +280,66 @@ pub fn encode_frame_with(
                     motion::Predictor::new(&frame.meta, previous.unwrap_or(&frame.meta));
                 motion::encode(&predictor, &frame.motion, &seen_depth, width, level)
             }
-            Codec::H264 => match color.as_deref_mut() {
-                Some(encoder) if encoder.codec() == b.codec && b.kind == BufferKind::Color => {
-                    encoder
-                        .encode_color(frame.meta.size, &frame.color)
-                        .map_err(|source| CodecError::Stream {
-                            codec: b.codec,
-                            source,
-                        })
-                }
-                _ => Err(CodecError::Stateful(b.codec)),
-            },
+            // A second video-coded buffer: one encoder cannot take both.
+            Codec::H264 => Err(CodecError::Stateful(b.codec)),
             other => {
                 let raw = frame.buffer_bytes(b.kind, b.format)?;
                 codec::encode_with_level(other, b.format, &raw, level)
             }
-        }
-        .map_err(|source| AssembleError::Codec {
+        };
+        coded.map_err(|source| AssembleError::Codec {
             kind: b.kind,
             source,
+        })
+    };
+    let results: Vec<Option<Result<Vec<u8>, AssembleError>>> = std::thread::scope(|scope| {
+        let color_job = video.map(|i| {
+            let b = &buffers[i];
+            let encoder = color
+                .take()
+                .filter(|e| e.codec() == b.codec && b.kind == BufferKind::Color);
+            let job =
+                move || {
+                    match encoder {
+                        None => Err(CodecError::Stateful(b.codec)),
+                        Some(encoder) => encoder
+                            .encode_color(frame.meta.size, &frame.color)
+                            .map_err(|source| CodecError::Stream {
+                                codec: b.codec,
+                                source,
+                            }),
+                    }
+                    .map_err(|source| AssembleError::Codec {
+                        kind: b.kind,
+                        source,
+                    })
+                };
+            scope.spawn(job)
+        });
+        let mut results: Vec<_> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| (Some(i) != video).then(|| encode(b)))
+            .collect();
+        if let (Some(i), Some(handle)) = (video, color_job) {
+            results[i] = Some(match handle.join() {
+                Ok(result) => result,
+                // An encoder's panic is a bug: it goes on as one.
+                Err(panic) => std::panic::resume_unwind(panic),
+            });
+        }
+        results
+    });
+    let mut descs = Vec::with_capacity(buffers.len());
+    let mut payloads = Vec::with_capacity(buffers.len());
+    for (b, result) in buffers.iter().zip(results) {
+        // The first failure in buffer order, as coded one after another
+        // (every buffer has a result: its own or the colour thread's).
+        let data = result.unwrap_or_else(|| {
+            Err(AssembleError::Codec {
+                kind: b.kind,
+                source: CodecError::Stateful(b.codec),
+            })
         })?;
         descs.push(BufferDesc {
             kind: b.kind,
@@ -637,6 +714,31 @@ mod tests {
                     codec: Codec::H264,
                     ..
                 }
+            })
+        ));
+        // A damaged depth payload: the colour decoder (on its own thread)
+        // is fed all the same, so the next frame follows in sequence, and
+        // the depth's error is returned.
+        let mut decoder = Counting::default();
+        let mut damaged = encoded[0].clone();
+        damaged.payloads[1].data.fill(0xAA);
+        assert!(matches!(
+            damaged.decode_with(Some(&mut decoder)),
+            Err(AssembleError::Codec {
+                kind: BufferKind::Depth,
+                ..
+            })
+        ));
+        assert_eq!(
+            encoded[1].decode_with(Some(&mut decoder))?.color,
+            frames[1].color
+        );
+        // Both failing (the decoder expects frame 2): the colour's error.
+        assert!(matches!(
+            damaged.decode_with(Some(&mut decoder)),
+            Err(AssembleError::Codec {
+                kind: BufferKind::Color,
+                ..
             })
         ));
         // Colour is the only buffer the codec suits.

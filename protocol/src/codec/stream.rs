@@ -20,8 +20,10 @@ pub const MAX_OVERHEAD: u64 = 64 * 1024;
 /// What a coder reports for one frame.
 pub type StreamError = Box<dyn std::error::Error + Send + Sync>;
 
-/// Encodes one stream's colour, frame after frame.
-pub trait ColorStreamEncoder {
+/// Encodes one stream's colour, frame after frame. `Send`: a frame's
+/// colour is coded on a thread of its own while the other buffers are
+/// coded beside it ([`crate::assemble::encode_frame_with`]).
+pub trait ColorStreamEncoder: Send {
     /// The codec it writes.
     fn codec(&self) -> Codec;
     /// The payload of `color`, a frame of `size` (linear RGBA).
@@ -30,7 +32,8 @@ pub trait ColorStreamEncoder {
 }
 
 /// Decodes one stream's colour payloads, in the order they were encoded.
-pub trait ColorStreamDecoder {
+/// `Send`, as the encoder is: colour is decoded beside the other buffers.
+pub trait ColorStreamDecoder: Send {
     /// The codec it reads.
     fn codec(&self) -> Codec;
     /// Decodes `payload` into `out` as a frame of `size` (linear RGBA,
