@@ -352,6 +352,8 @@ fn run_group(
         // Shared by the variants of this step: the fed frame per step size
         // and colour setting, the display-encoded truth per position.
         let mut kept: HashMap<(usize, video::ColorCodec), Arc<Frame>> = HashMap::new();
+        // The fed frame per step size before the stream's codecs.
+        let mut decimated: HashMap<usize, Frame> = HashMap::new();
         let mut truths: HashMap<usize, Arc<protocol::display::DisplayImage>> = HashMap::new();
         // What each variant generated this step, scored once all are in.
         let mut pending = Vec::new();
@@ -370,22 +372,36 @@ fn run_group(
             let fed = match kept.get(&(s, color)) {
                 Some(fed) => fed.clone(),
                 None => {
-                    let skipped: Vec<&Frame> = if m >= s {
-                        (m + 1 - s..m).map(|k| at(k).fed.as_ref()).collect()
-                    } else {
-                        Vec::new()
-                    };
-                    // A scene's fed frame is rendered at the fed rate, as
-                    // a server at that rate renders it; a dump's motion is
-                    // composed through the skipped frames. Composition
-                    // takes a vector from the wrong surface along moving
-                    // edges (crossing at 96×54: 15–20 pixels a frame off by
-                    // over half a pixel) and, coded, costs ten times the
-                    // bits of rendered motion (720p).
-                    let direct = seq.render_fed(at(m).fed.meta.index, s)?;
-                    let fed = match direct {
-                        Some(frame) => framegen::decimate::kept(&frame, &[], s),
-                        None => framegen::decimate::kept(&at(m).fed, &skipped, s),
+                    // The fed frame as rendered, once per step size for
+                    // every colour setting.
+                    let fed = match decimated.get(&s) {
+                        Some(fed) => Frame::clone(fed),
+                        None => {
+                            // A scene's fed frame is rendered at the fed
+                            // rate, as a server at that rate renders it; a
+                            // dump's motion is composed through the skipped
+                            // frames. Composition takes a vector from the
+                            // wrong surface along moving edges (crossing at
+                            // 96×54: 15–20 pixels a frame off by over half
+                            // a pixel) and, coded, costs ten times the bits
+                            // of rendered motion (720p).
+                            let fed = match seq.render_fed(at(m).fed.meta.index, s)? {
+                                Some(frame) => framegen::decimate::kept(&frame, &[], s),
+                                None => {
+                                    let skipped: Vec<&Frame> = if m >= s {
+                                        (m + 1 - s..m).map(|k| at(k).fed.as_ref()).collect()
+                                    } else {
+                                        Vec::new()
+                                    };
+                                    framegen::decimate::kept(&at(m).fed, &skipped, s)
+                                }
+                            };
+                            // Kept for the other colour settings, if any.
+                            if config.colors.len() > 1 {
+                                decimated.insert(s, fed.clone());
+                            }
+                            fed
+                        }
                     };
                     // Through the stream's codecs, coded against the fed
                     // frame before it, as a server at this rate sends it.
