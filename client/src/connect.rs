@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use protocol::assemble::AssembleError;
 use protocol::wire::{
-    self, ClientStats, Decoder, Hello, KeyframeRequest, Message, Ping, Reject, ServerStats,
-    WIRE_VERSION, Welcome, WindowMode,
+    self, ClientStats, Decoder, Hello, Input, InputEcho, KeyframeRequest, Message, Ping, Reject,
+    ServerStats, WIRE_VERSION, Welcome, WindowMode,
 };
 use protocol::{Codec, Frame, FrameSize, Limits};
 use tokio::sync::mpsc;
@@ -115,6 +115,9 @@ pub struct Arrived {
     pub received: Instant,
     /// When it was decoded (it could be shown from then on).
     pub decoded: Instant,
+    /// The viewer input its camera came from (interactive streams, issue
+    /// 20), as the server echoed it.
+    pub input: Option<InputEcho>,
 }
 
 /// A connected session. Frames arrive on [`Session::frames`].
@@ -139,6 +142,22 @@ impl Session {
     /// The protocol violation that ended the session, if one did.
     pub fn failure(&self) -> Option<String> {
         self.failure.lock().ok().and_then(|f| f.clone())
+    }
+
+    /// Sends the viewer's input as a datagram (unreliable: a lost one is
+    /// superseded by the next). An interactive server renders from the
+    /// newest it took.
+    pub fn send_input(&self, input: &Input) -> Result<(), ConnectError> {
+        let bytes = wire::encode(&Message::Input(*input)).map_err(protocol_err)?;
+        self.conn
+            .send_datagram(bytes.into())
+            .map_err(|e| ConnectError::Protocol(format!("input not sent: {e}")))
+    }
+
+    /// The QUIC connection, for tools and tests that speak the wire
+    /// directly.
+    pub fn connection(&self) -> &quinn::Connection {
+        &self.conn
     }
 
     /// Why the connection closed, once it has.
@@ -471,6 +490,7 @@ async fn assemble(
             continue;
         };
         let received = Instant::now();
+        let input = encoded.header.input;
         let video = encoded
             .header
             .buffers
@@ -521,6 +541,7 @@ async fn assemble(
                     frame,
                     received,
                     decoded: Instant::now(),
+                    input,
                 };
                 if frames.send(arrived).await.is_err() {
                     return;

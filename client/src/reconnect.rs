@@ -452,6 +452,7 @@ mod tests {
             },
             received,
             decoded: received,
+            input: None,
         }
     }
 

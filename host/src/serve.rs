@@ -17,6 +17,7 @@ use protocol::Limits;
 use protocol::wire::{self, Decoder, Hello, Message, MessageKind, Pong, ServerStats};
 use tokio::sync::{Semaphore, broadcast};
 
+use crate::input::{InputCounts, InputGate};
 use crate::recovery::{Decision, Recovery};
 use crate::session::{self, Policy};
 use crate::source::{Feed, KeyframeRequests};
@@ -61,6 +62,8 @@ pub struct ClientCounters {
     pub keyframe_requests: AtomicU64,
     /// Set by a keyframe request, taken by the session.
     lost: std::sync::atomic::AtomicBool,
+    /// What the session's input gate did.
+    pub input: std::sync::Mutex<InputCounts>,
 }
 
 /// Server-wide counters.
@@ -305,7 +308,11 @@ async fn connection(
         let feed = feed.clone();
         tokio::task::spawn_blocking(move || feed.subscribe()).await??
     };
-    let (mut rx, keyframes) = (subscription.frames, subscription.keyframes);
+    let (mut rx, keyframes, viewer) = (
+        subscription.frames,
+        subscription.keyframes,
+        subscription.viewer,
+    );
     let mut source = JoinedOffRuntime(subscription.source);
     // The client starts from a keyframe: ask for one now.
     let mut recovery = Recovery::new();
@@ -326,7 +333,12 @@ async fn connection(
         decoder,
         client.clone(),
     ));
-    let datagrams = tokio::spawn(datagram_loop(conn.clone()));
+    let datagrams = tokio::spawn(datagram_loop(
+        conn.clone(),
+        InputGate::new(feed.input_limits()),
+        viewer,
+        client.clone(),
+    ));
     let permits = Arc::new(Semaphore::new(MAX_IN_FLIGHT));
     let result = loop {
         let frame = tokio::select! {
@@ -409,6 +421,7 @@ async fn connection(
         session_id,
         held_back = client.held_back.load(Ordering::Relaxed),
         keyframe_requests = client.keyframe_requests.load(Ordering::Relaxed),
+        input = ?client.input.lock().map(|c| *c).unwrap_or_default(),
         "session counters"
     );
     control.abort();
@@ -497,11 +510,31 @@ async fn control_loop(
     }
 }
 
-/// Answers pings; logs input.
-async fn datagram_loop(conn: quinn::Connection) {
-    let limits = Limits::default();
+/// Answers pings; passes input through the session's gate to its viewer
+/// camera (interactive feeds; otherwise input is only counted).
+async fn datagram_loop(
+    conn: quinn::Connection,
+    mut gate: InputGate,
+    viewer: Option<crate::source::ViewerSender>,
+    client: Arc<ClientCounters>,
+) {
+    let limits = Limits::control();
     while let Ok(d) = conn.read_datagram().await {
-        match wire::decode_message(&d, &limits) {
+        let decoded = wire::decode_message(&d, &limits);
+        match &decoded {
+            Ok((Message::Input(i), _)) => {
+                if let (Some(taken), Some(viewer)) = (gate.admit(i, Instant::now()), &viewer) {
+                    viewer.send_replace(Some(taken));
+                }
+            }
+            Ok(_) => {}
+            // Bad input, or garbage: counted with the inputs refused.
+            Err(_) => gate.invalid(),
+        }
+        if let Ok(mut c) = client.input.lock() {
+            *c = gate.counts();
+        }
+        match decoded {
             Ok((Message::Ping(p), _)) => {
                 let pong = Message::Pong(Pong {
                     seq: p.seq,

@@ -38,6 +38,10 @@ pub struct Policy {
 /// cores' worth at 640×360 (`serve --max-sessions`).
 pub const DEFAULT_MAX_SESSIONS: usize = 16;
 
+/// Default cap of interactive sessions: each renders its own frames, and
+/// this machine's software renderer takes 30-50 ms a 320x180 frame.
+pub const DEFAULT_MAX_INTERACTIVE_SESSIONS: usize = 2;
+
 /// The largest frame a stream of displayed `size` sends with `window`: a
 /// widened window at the same pixel density (keep-density) grows each side
 /// by up to the window's `max_extent`; keep-size keeps the size.

@@ -5,7 +5,11 @@
 //!
 //! A live scene is rendered once and shared by all sessions ([`Feed::Live`]);
 //! a dump replay can instead start afresh for every session, from its first
-//! frame ([`Feed::PerSession`]).
+//! frame ([`Feed::PerSession`]). An interactive scene (issue 20) is rendered
+//! for every session from that session's viewer camera
+//! ([`Feed::Interactive`]): the newest input its [`crate::input::InputGate`]
+//! took, else the scene's own path; each frame echoes the input it was
+//! rendered with.
 //!
 //! Video-coded colour (issue 19 §1) is encoded once too, by the producer:
 //! a session whose client joins or loses a frame asks the producer for a
@@ -17,17 +21,24 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use protocol::Pose;
 use protocol::assemble::encode_frame_with;
 use protocol::codec::stream::ColorStreamEncoder;
 use protocol::import::AnyDump;
+use protocol::wire::InputEcho;
 use protocol::wire::StreamBuffer;
 use protocol::{BufferKind, Codec, Frame, FrameSize};
-use tokio::sync::broadcast;
+use tokio::sync::{broadcast, watch};
 use video::{ColorCodec, ColorEncoder};
 
+use crate::input::{InputLimits, ViewerInput};
 use crate::pacer::{Pace, Pacer};
 use scene::Scene;
-use scene::render::{Renderer, WindowSettings};
+use scene::render::{Renderer, ViewerPoses, WindowSettings};
+
+/// Where a session's gate puts the newest viewer input, and an interactive
+/// producer reads it.
+pub type ViewerSender = watch::Sender<Option<ViewerInput>>;
 
 /// One frame, encoded as the bytes of its per-frame stream.
 #[derive(Debug)]
@@ -212,9 +223,45 @@ pub enum Feed {
         /// How to encode it.
         encoding: Encoding,
     },
+    /// A scene rendered for each session from its viewer's camera (issue
+    /// 20): every session costs a render.
+    Interactive {
+        /// The scene ([`SourceSpec::Scene`]).
+        spec: SourceSpec,
+        /// How to encode it.
+        encoding: Encoding,
+        /// What each session's gate takes (positions around the scene's
+        /// origin).
+        input: InputLimits,
+    },
 }
 
 impl Feed {
+    /// An interactive feed of the scene `spec` ([`Feed::Interactive`]),
+    /// its input bounded around the scene's origin.
+    pub fn interactive(spec: SourceSpec, encoding: Encoding) -> anyhow::Result<Self> {
+        let SourceSpec::Scene { spec: scene, .. } = &spec else {
+            anyhow::bail!("only a scene can be interactive (a dump has no viewer camera)");
+        };
+        let origin = glam::DVec3::from(Scene::load(scene)?.origin);
+        Ok(Feed::Interactive {
+            spec,
+            encoding,
+            input: InputLimits {
+                origin,
+                ..InputLimits::default()
+            },
+        })
+    }
+
+    /// What a session's input gate takes.
+    pub fn input_limits(&self) -> InputLimits {
+        match self {
+            Feed::Interactive { input, .. } => *input,
+            _ => InputLimits::default(),
+        }
+    }
+
     /// A receiver for one session, and the source it owns (per-session
     /// feeds: opened, paused until [`Source::resume`], so that its pacing
     /// starts when the session does), which stops when dropped; and the
@@ -225,18 +272,27 @@ impl Feed {
                 frames: channel.subscribe(),
                 keyframes: channel.keyframes(),
                 source: None,
+                viewer: None,
             }),
-            Feed::PerSession { spec, encoding } => {
+            Feed::PerSession { spec, encoding } | Feed::Interactive { spec, encoding, .. } => {
                 // The producer thread holds the only sender: when the
                 // replay ends, the session sees the channel close.
                 let channel = Source::channel();
                 let frames = channel.subscribe();
                 let keyframes = channel.keyframes();
-                let source = Source::start_paused(spec.clone(), encoding.clone(), channel)?;
+                let (viewer, input) = match self {
+                    Feed::Interactive { .. } => {
+                        let (tx, rx) = watch::channel(None);
+                        (Some(tx), Some(rx))
+                    }
+                    _ => (None, None),
+                };
+                let source = Source::open(spec.clone(), encoding.clone(), channel, input)?;
                 Ok(Subscription {
                     frames,
                     keyframes,
                     source: Some(source),
+                    viewer,
                 })
             }
         }
@@ -251,6 +307,8 @@ pub struct Subscription {
     pub keyframes: KeyframeRequests,
     /// The session's own source (per-session feeds).
     pub source: Option<Source>,
+    /// Where the session puts its viewer's input (interactive feeds).
+    pub viewer: Option<ViewerSender>,
 }
 
 /// How many frames a lagging client may be behind before it loses the
@@ -287,10 +345,20 @@ impl Source {
         encoding: impl Into<Encoding>,
         frames: Channel,
     ) -> anyhow::Result<Self> {
-        let encoding: Encoding = encoding.into();
+        Self::open(spec, encoding.into(), frames, None)
+    }
+
+    /// [`Source::start_paused`]; with `viewer`, a scene is rendered from
+    /// the newest viewer input there (its path until there is one).
+    fn open(
+        spec: SourceSpec,
+        encoding: Encoding,
+        frames: Channel,
+        viewer: Option<watch::Receiver<Option<ViewerInput>>>,
+    ) -> anyhow::Result<Self> {
         let stats = Arc::new(SourceStats::default());
         let stop = Arc::new(AtomicBool::new(false));
-        let mut producer = Producer::open(&spec)?;
+        let mut producer = Producer::open(&spec, viewer)?;
         let (size, fps) = producer.size_and_fps();
         let mut color = encoding.color_encoder(size, fps)?;
         let (go, released) = std::sync::mpsc::channel::<()>();
@@ -359,8 +427,40 @@ struct Gap {
 }
 
 enum Producer {
-    Scene { renderer: Box<Renderer>, fps: f64 },
-    Dump { reader: Box<AnyDump>, looped: bool },
+    Scene {
+        renderer: Box<Renderer>,
+        fps: f64,
+        viewer: Option<ViewerCamera>,
+    },
+    Dump {
+        reader: Box<AnyDump>,
+        looped: bool,
+    },
+}
+
+/// The camera of an interactive producer (issue 20): the newest viewer
+/// input's pose, else the scene's path, and the two poses before it (the
+/// motion vectors lead to the previous one; the window looks at both).
+struct ViewerCamera {
+    input: watch::Receiver<Option<ViewerInput>>,
+    prev: Option<Pose>,
+    before: Option<Pose>,
+}
+
+impl ViewerCamera {
+    /// The poses of the next frame (`path`: the scene's own camera at its
+    /// time) and the input they come from. The history moves on for a
+    /// skipped frame too: the next frame's motion leads to its time, so to
+    /// the pose it would have had.
+    fn advance(&mut self, path: Pose) -> (ViewerPoses, Option<InputEcho>) {
+        let newest = *self.input.borrow();
+        let now = newest.map_or(path, |v| v.pose);
+        let prev = self.prev.unwrap_or(now);
+        let before = self.before.unwrap_or(prev);
+        self.before = Some(prev);
+        self.prev = Some(now);
+        (ViewerPoses { now, prev, before }, newest.map(|v| v.echo))
+    }
 }
 
 /// What the producer encodes with.
@@ -373,12 +473,15 @@ impl Producer {
     /// The stream's displayed size and rate.
     fn size_and_fps(&self) -> (FrameSize, f64) {
         match self {
-            Producer::Scene { renderer, fps } => (renderer.size(), *fps),
+            Producer::Scene { renderer, fps, .. } => (renderer.size(), *fps),
             Producer::Dump { reader, .. } => (reader.size(), reader.fps()),
         }
     }
 
-    fn open(spec: &SourceSpec) -> anyhow::Result<Self> {
+    fn open(
+        spec: &SourceSpec,
+        viewer: Option<watch::Receiver<Option<ViewerInput>>>,
+    ) -> anyhow::Result<Self> {
         Ok(match spec {
             SourceSpec::Scene {
                 spec,
@@ -393,9 +496,15 @@ impl Producer {
                 Producer::Scene {
                     renderer: Box::new(renderer),
                     fps: *fps,
+                    viewer: viewer.map(|input| ViewerCamera {
+                        input,
+                        prev: None,
+                        before: None,
+                    }),
                 }
             }
             SourceSpec::Dump { dir, looped } => {
+                anyhow::ensure!(viewer.is_none(), "a dump has no viewer camera");
                 // A native dump, a Blender render or an Unreal capture.
                 let reader = Box::new(AnyDump::open(dir)?);
                 anyhow::ensure!(!reader.is_empty(), "the dump has no frames");
@@ -431,9 +540,41 @@ impl Producer {
         })
     }
 
-    fn frame(&mut self, k: u64) -> anyhow::Result<Frame> {
+    /// The viewer camera of a skipped frame `k` moves on.
+    fn skip(&mut self, k: u64) {
+        if let Producer::Scene {
+            renderer,
+            fps,
+            viewer: Some(viewer),
+        } = self
+        {
+            viewer.advance(Self::path_pose(renderer, k as f64 / *fps));
+        }
+    }
+
+    /// The scene's own camera at time `t`.
+    fn path_pose(renderer: &Renderer, t: f64) -> Pose {
+        renderer.camera(&renderer.scene().evaluate(t)).pose
+    }
+
+    /// Frame `k`, and the viewer input it was rendered from.
+    fn frame(&mut self, k: u64) -> anyhow::Result<(Frame, Option<InputEcho>)> {
         Ok(match self {
-            Producer::Scene { renderer, fps } => renderer.render(k, *fps)?,
+            Producer::Scene {
+                renderer,
+                fps,
+                viewer: Some(viewer),
+            } => {
+                let time = |k: u64| k as f64 / *fps;
+                let (poses, echo) = viewer.advance(Self::path_pose(renderer, time(k)));
+                let frame = renderer.render_posed(k, time(k), time(k.saturating_sub(1)), &poses)?;
+                (frame, echo)
+            }
+            Producer::Scene {
+                renderer,
+                fps,
+                viewer: None,
+            } => (renderer.render(k, *fps)?, None),
             Producer::Dump { reader, looped } => {
                 let n = reader.len();
                 let mut f = reader.read_frame(k % n)?;
@@ -446,7 +587,7 @@ impl Producer {
                     f.meta.time += Self::loop_offset(reader, true, k)?;
                     f.meta.cut |= k >= n && k % n == 0;
                 }
-                f
+                (f, None)
             }
         })
     }
@@ -537,6 +678,7 @@ impl Producer {
                 }
                 Pace::Skip => {
                     stats.skipped.fetch_add(1, Ordering::Relaxed);
+                    self.skip(k);
                     k += 1;
                     continue;
                 }
@@ -544,7 +686,7 @@ impl Producer {
             }
             let started = Instant::now();
             let frame = self.frame(k);
-            let Some(mut frame) = self.readable(frame, k, stats, &mut gap)? else {
+            let Some((mut frame, input)) = self.readable(frame, k, stats, &mut gap)? else {
                 k += 1;
                 continue;
             };
@@ -570,6 +712,7 @@ impl Producer {
                 frame.meta.host_processing.saturating_add(started.elapsed());
             let mut encoded = encoded;
             encoded.header.meta.host_processing = frame.meta.host_processing;
+            encoded.header.input = input;
             let bytes = encoded.to_stream_bytes()?;
             let buffer_bytes = encoded
                 .header
@@ -609,7 +752,7 @@ mod tests {
     fn a_looped_dump_keeps_time_running_and_cuts_at_the_seam() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/blender");
         let spec = SourceSpec::Dump { dir, looped: true };
-        let mut producer = Producer::open(&spec).unwrap();
+        let mut producer = Producer::open(&spec, None).unwrap();
         let mut last: Option<f64> = None;
         for k in 0..25 {
             let (t, next) = producer.times(k).unwrap();
@@ -622,7 +765,8 @@ mod tests {
                 assert!((t - prev - 1.0 / 30.0).abs() < 1e-9, "frame {k}");
             }
             last = Some(t);
-            let f = producer.frame(k).unwrap();
+            let (f, input) = producer.frame(k).unwrap();
+            assert_eq!(input, None);
             assert_eq!(f.meta.index, k);
             assert!((f.meta.time - t).abs() < 1e-9);
             assert_eq!(f.meta.cut, k == 10 || k == 20, "frame {k}");
@@ -632,7 +776,7 @@ mod tests {
 
     /// Runs `spec` to its end and returns the frames' indices and cuts.
     fn replay(spec: &SourceSpec) -> (Vec<(u64, bool)>, SourceStats, anyhow::Result<()>) {
-        let mut producer = Producer::open(spec).unwrap();
+        let mut producer = Producer::open(spec, None).unwrap();
         let tx = Channel {
             frames: broadcast::channel(64).0,
             keyframe: KeyframeRequests::default(),

@@ -356,6 +356,7 @@ pub fn encode_frame_with(
     let header = FrameHeader {
         meta: frame.meta,
         buffers: descs,
+        input: None,
     };
     Message::FrameHeader(header.clone()).validate(&Limits::default())?;
     Ok(EncodedFrame { header, payloads })

@@ -7,7 +7,7 @@ use std::path::Path;
 use glam::{DVec2, DVec3};
 use protocol::dump::{DumpReader, DumpWriter, Manifest};
 use protocol::{BufferKind, Frame, FrameSize, WorldPoint};
-use scene::render::{Pass, Renderer, plan};
+use scene::render::{Pass, Renderer, ViewerPoses, plan};
 use scene::{Scene, builtin};
 
 const SIZE: FrameSize = FrameSize::new(320, 180);
@@ -159,6 +159,74 @@ fn static_motion_matches_depth_and_camera_reprojection() {
             }
         }
     }
+}
+
+/// The viewer's cameras (issue 20): given the scene's own path, a posed
+/// render is the scripted one bit for bit; given a camera turning away from
+/// the path, the frame shows that camera and its static motion vectors
+/// lead to the previous viewer camera through depth.
+#[test]
+fn a_viewer_camera_renders_like_the_path_it_replaces() {
+    let fps = 30.0;
+    let index = 11u64;
+    let time = |k: u64| k as f64 / fps;
+    let mut r = renderer("default");
+    let path = |r: &Renderer, k: u64| r.camera(&r.scene().evaluate(time(k))).pose;
+    let poses = ViewerPoses {
+        now: path(&r, index),
+        prev: path(&r, index - 1),
+        before: path(&r, index - 2),
+    };
+    let scripted = r.render(index, fps).unwrap();
+    let posed = r
+        .render_posed(index, time(index), time(index - 1), &poses)
+        .unwrap();
+    let timeless = |f: &Frame| protocol::FrameMeta {
+        host_processing: std::time::Duration::ZERO,
+        ..f.meta
+    };
+    assert_eq!(timeless(&scripted), timeless(&posed));
+    assert_eq!(scripted.color, posed.color);
+    assert_eq!(scripted.depth, posed.depth);
+    assert_eq!(scripted.motion, posed.motion);
+
+    // A viewer turning 3° a frame about the vertical, 1 m to the side.
+    let turn = |k: u64| {
+        let p = path(&r, index);
+        protocol::Pose::new(
+            p.position + DVec3::new(1.0, 0.0, 0.0),
+            glam::DQuat::from_rotation_y((k as f64 * 3.0).to_radians()) * p.rotation,
+        )
+    };
+    let viewer = ViewerPoses {
+        now: turn(2),
+        prev: turn(1),
+        before: turn(0),
+    };
+    let frame = r
+        .render_posed(index, time(index), time(index - 1), &viewer)
+        .unwrap();
+    assert_eq!(frame.meta.camera.pose, viewer.now);
+    assert!(!frame.meta.cut);
+    assert_ne!(frame.color, scripted.color);
+    let ids = r.last_ids().to_vec();
+    let mut prev_cam = frame.meta.camera;
+    prev_cam.pose = viewer.prev;
+    let dims = SIZE.as_f64();
+    let (max, mean, n) = compare(&frame, |i| {
+        if is_animated(&r, ids[i]) {
+            return None;
+        }
+        frame
+            .meta
+            .camera
+            .static_motion(&prev_cam, pixel(i), f64::from(frame.depth[i]), dims, dims)
+    });
+    assert!(n > (SIZE.pixels() as usize) / 2, "only {n} static pixels");
+    assert!(
+        max < 0.05,
+        "static motion off by {max:.4} px (mean {mean:.5})"
+    );
 }
 
 #[test]

@@ -81,6 +81,7 @@ enum Command {
     #[command(after_help = "Examples:
   server serve                                   builtin:default at 640x360, 30 fps on 127.0.0.1:4433
   server serve --dump dumps/default-1 --loop     a dump, looped, as one live stream
+  server serve --interactive --size 320x180      each client's input drives its own camera
 Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
     Serve {
         /// `builtin:NAME` or a RON scene file (ignored with --dump).
@@ -121,9 +122,16 @@ Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
         /// `lossless` (zstd).
         #[arg(long, default_value = "compact", value_parser = clap::value_parser!(BufferSet))]
         geometry: BufferSet,
+        /// Render the scene for each client from the camera its input
+        /// sends (issue 20; the scene's path until the first input), each
+        /// frame echoing the input it was rendered with. Every session
+        /// costs a render.
+        #[arg(long, conflicts_with = "dump")]
+        interactive: bool,
         /// Most sessions at once; one more is refused as "server full".
-        #[arg(long, default_value_t = host::session::DEFAULT_MAX_SESSIONS)]
-        max_sessions: usize,
+        /// Default: 16, or 2 with --interactive (each renders).
+        #[arg(long)]
+        max_sessions: Option<usize>,
         /// Congestion control of the frames sent: cubic (loss-based) or bbr
         /// (model-based: keeps a stream through random loss, starves under
         /// strongly varying delay; see the README's "Impaired networks").
@@ -212,9 +220,15 @@ fn command(cli: Cli) -> anyhow::Result<()> {
             window,
             color_codec,
             geometry,
+            interactive,
             max_sessions,
             congestion,
         } => {
+            let max_sessions = max_sessions.unwrap_or(if interactive {
+                host::session::DEFAULT_MAX_INTERACTIVE_SESSIONS
+            } else {
+                host::session::DEFAULT_MAX_SESSIONS
+            });
             let (source, size, fps) = match dump {
                 Some(dir) => {
                     // Native dumps, Blender renders and Unreal captures alike.
@@ -248,6 +262,7 @@ fn command(cli: Cli) -> anyhow::Result<()> {
                 window,
                 color_codec,
                 geometry,
+                interactive,
                 max_sessions,
                 congestion,
             }))
@@ -374,6 +389,7 @@ struct ServeArgs {
     window: WindowMode,
     color_codec: video::ColorCodec,
     geometry: BufferSet,
+    interactive: bool,
     max_sessions: usize,
     congestion: host::tls::Congestion,
 }
@@ -406,7 +422,9 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     // A dump replay without --loop starts afresh for every client; a scene
     // (or a looping dump) is one live stream that clients join.
     let per_session = matches!(args.source, SourceSpec::Dump { looped: false, .. });
-    let (feed, source) = if per_session {
+    let (feed, source) = if args.interactive {
+        (Feed::interactive(args.source, encoding)?, None)
+    } else if per_session {
         (
             Feed::PerSession {
                 spec: args.source,

@@ -120,6 +120,20 @@ pub struct FrameHeader {
     pub meta: FrameMeta,
     /// The payloads that follow, one per kind, in any order.
     pub buffers: Vec<BufferDesc>,
+    /// The viewer input whose camera rendered the frame (interactive
+    /// sessions, issue 20); `None` for a scripted camera.
+    pub input: Option<InputEcho>,
+}
+
+/// Which [`Input`] a frame was rendered with, echoed in its header so that
+/// the client can tell how old the camera it shows is (input-to-photon)
+/// without a shared clock: both fields are the client's own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InputEcho {
+    /// The input's [`Input::seq`].
+    pub seq: u64,
+    /// The input's [`Input::client_time_us`].
+    pub client_time_us: u64,
 }
 
 /// One buffer's encoded bytes. On the wire its body is a small bincode head

@@ -206,8 +206,15 @@ pub fn message() -> impl Strategy<Value = Message> {
             ),
         (reason, text()).prop_map(|(reason, message)| Message::Reject(Reject { reason, message })),
         meta()
-            .prop_flat_map(|meta| (Just(meta), buffers(meta.size)))
-            .prop_map(|(meta, buffers)| Message::FrameHeader(FrameHeader { meta, buffers })),
+            .prop_flat_map(|meta| (Just(meta), buffers(meta.size), any::<Option<(u64, u64)>>()))
+            .prop_map(|(meta, buffers, input)| Message::FrameHeader(FrameHeader {
+                meta,
+                buffers,
+                input: input.map(|(seq, client_time_us)| InputEcho {
+                    seq,
+                    client_time_us
+                }),
+            })),
         (
             any::<u64>(),
             kind(),

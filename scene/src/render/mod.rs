@@ -94,6 +94,19 @@ struct GpuMesh {
     bounds: (DVec3, f64),
 }
 
+/// The viewer's cameras for [`Renderer::render_posed`]: the frame's own,
+/// the previous frame's (motion vectors lead to it) and the one before that
+/// (the previous frame's adaptive window).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewerPoses {
+    /// This frame's camera.
+    pub now: Pose,
+    /// The previous frame's camera.
+    pub prev: Pose,
+    /// The camera of the frame before the previous one.
+    pub before: Pose,
+}
+
 /// Renders frames of one scene at one size.
 pub struct Renderer {
     gpu: Gpu,
@@ -358,7 +371,26 @@ impl Renderer {
         prev_prev_t: f64,
     ) -> Result<Frame, RenderError> {
         let scope = self.gpu.scope("rendering a frame");
-        let frame = self.render_in_scope(index, t, prev_t, prev_prev_t);
+        let frame = self.render_in_scope(index, [t, prev_t, prev_prev_t], None);
+        scope.finish()?;
+        frame
+    }
+
+    /// Renders the scene's state at time `t` (animation stays a function of
+    /// time) seen from the viewer's cameras instead of the scene's path
+    /// (interactive streaming, issue 20): motion vectors lead to
+    /// `poses.prev` at `prev_t`, and the adaptive window is chosen from
+    /// `poses.before` → `poses.prev` as for a scripted camera. The scene's
+    /// shots do not apply: a frame is never a cut.
+    pub fn render_posed(
+        &mut self,
+        index: u64,
+        t: f64,
+        prev_t: f64,
+        poses: &ViewerPoses,
+    ) -> Result<Frame, RenderError> {
+        let scope = self.gpu.scope("rendering a frame");
+        let frame = self.render_in_scope(index, [t, prev_t, prev_t], Some(poses));
         scope.finish()?;
         frame
     }
@@ -366,19 +398,22 @@ impl Renderer {
     fn render_in_scope(
         &mut self,
         index: u64,
-        t: f64,
-        prev_t: f64,
-        prev_prev_t: f64,
+        [t, prev_t, prev_prev_t]: [f64; 3],
+        given: Option<&ViewerPoses>,
     ) -> Result<Frame, RenderError> {
         let started = Instant::now();
         let state = self.scene.evaluate(t);
         let mut prev = self.scene.evaluate(prev_t);
-        let cut = prev.shot != state.shot;
+        let cut = given.is_none() && prev.shot != state.shot;
         if cut {
             prev = state.clone();
         }
         let mut camera = self.camera(&state);
         let mut prev_camera = self.camera(&prev);
+        if let Some(poses) = given {
+            camera.pose = poses.now;
+            prev_camera.pose = poses.prev;
+        }
         // Windows of this and of the previous frame (motion vectors land in
         // the previous frame's pixel grid, which its own window defines).
         let (window, size) = if cut {
@@ -389,13 +424,18 @@ impl Renderer {
         let (prev_window, prev_size) = if cut {
             (window, size)
         } else {
-            let before_state = self.scene.evaluate(prev_prev_t);
-            let before = if before_state.shot == prev.shot {
-                self.camera(&before_state)
-            } else {
-                prev_camera
+            let before = match given {
+                Some(poses) => poses.before,
+                None => {
+                    let before_state = self.scene.evaluate(prev_prev_t);
+                    if before_state.shot == prev.shot {
+                        self.camera(&before_state).pose
+                    } else {
+                        prev_camera.pose
+                    }
+                }
             };
-            self.window_for(&before.pose, &prev_camera)
+            self.window_for(&before, &prev_camera)
         };
         camera.window = window;
         prev_camera.window = prev_window;

@@ -127,22 +127,41 @@ impl Fixture {
             .collect()
     }
 
+    /// The fixture's policy for another server `name`, sending `buffers`.
+    fn policy(&self, name: &str, buffers: &[StreamBuffer], max_sessions: usize) -> Policy {
+        Policy {
+            token: TOKEN.into(),
+            server_name: name.into(),
+            size: SIZE,
+            max_frame: SIZE,
+            fps: REPLAY_FPS,
+            buffers: buffers.to_vec(),
+            window_mode: WindowMode::Off,
+            max_sessions,
+            congestion: Congestion::default(),
+            effects: protocol::Effects::UNKNOWN,
+        }
+    }
+
+    /// A second server on `feed` under the fixture's identity; a config to
+    /// connect to it.
+    fn second_server(&self, policy: Policy, feed: Feed) -> (Server, ConnectConfig) {
+        let server =
+            Server::start("127.0.0.1:0".parse().unwrap(), &self.identity, policy, feed).unwrap();
+        let mut config = self.config();
+        config.addr = server.local_addr().unwrap();
+        (server, config)
+    }
+
     /// A second server replaying the dump afresh for every session (at
     /// [`REPLAY_FPS`]), encoded as `encoding` says; a config to connect to
     /// it.
     pub fn replay_server(&self, encoding: host::source::Encoding) -> (Server, ConnectConfig) {
-        let policy = Policy {
-            token: TOKEN.into(),
-            server_name: "replay".into(),
-            size: SIZE,
-            max_frame: SIZE,
-            fps: REPLAY_FPS,
-            buffers: encoding.buffers.clone(),
-            window_mode: WindowMode::Off,
-            max_sessions: host::session::DEFAULT_MAX_SESSIONS,
-            congestion: Congestion::default(),
-            effects: protocol::Effects::UNKNOWN,
-        };
+        let policy = self.policy(
+            "replay",
+            &encoding.buffers,
+            host::session::DEFAULT_MAX_SESSIONS,
+        );
         let feed = Feed::PerSession {
             spec: SourceSpec::Dump {
                 dir: self.dump.clone(),
@@ -150,11 +169,26 @@ impl Fixture {
             },
             encoding,
         };
-        let replay =
-            Server::start("127.0.0.1:0".parse().unwrap(), &self.identity, policy, feed).unwrap();
-        let mut config = self.config();
-        config.addr = replay.local_addr().unwrap();
-        (replay, config)
+        self.second_server(policy, feed)
+    }
+
+    /// A server rendering `scene` at [`SIZE`] and [`REPLAY_FPS`] for each
+    /// session from its viewer's input (issue 20), colour raw; a config to
+    /// connect to it.
+    pub fn interactive_server(&self, scene: &str) -> (Server, ConnectConfig) {
+        let encoding = host::source::Encoding::new(
+            protocol::wire::BufferSet::Lossless,
+            video::ColorCodec::Raw,
+        );
+        let policy = self.policy("interactive", &encoding.buffers, 2);
+        let spec = SourceSpec::Scene {
+            spec: scene.into(),
+            size: SIZE,
+            fps: REPLAY_FPS,
+            window: Default::default(),
+            base: ".".into(),
+        };
+        self.second_server(policy, Feed::interactive(spec, encoding).unwrap())
     }
 
     pub fn start_source(&self) -> Source {
