@@ -148,10 +148,7 @@ impl Session {
     /// superseded by the next). An interactive server renders from the
     /// newest it took.
     pub fn send_input(&self, input: &Input) -> Result<(), ConnectError> {
-        let bytes = wire::encode(&Message::Input(*input)).map_err(protocol_err)?;
-        self.conn
-            .send_datagram(bytes.into())
-            .map_err(|e| ConnectError::Protocol(format!("input not sent: {e}")))
+        send_input(&self.conn, input)
     }
 
     /// The QUIC connection, for tools and tests that speak the wire
@@ -173,6 +170,13 @@ impl Session {
         }
         self.endpoint.wait_idle().await;
     }
+}
+
+/// Sends `input` as a datagram on `conn`.
+pub(crate) fn send_input(conn: &quinn::Connection, input: &Input) -> Result<(), ConnectError> {
+    let bytes = wire::encode(&Message::Input(*input)).map_err(protocol_err)?;
+    conn.send_datagram(bytes.into())
+        .map_err(|e| ConnectError::Protocol(format!("input not sent: {e}")))
 }
 
 /// How often the client makes sure the connection carries a packet.

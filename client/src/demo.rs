@@ -26,7 +26,7 @@ pub struct LocalServer {
     pub fingerprint: String,
     /// The access token.
     pub token: String,
-    _source: Source,
+    _source: Option<Source>,
     _identity_dir: tempfile::TempDir,
 }
 
@@ -39,6 +39,9 @@ pub struct Link {
     pub congestion: Congestion,
     /// The colour codec.
     pub color: video::ColorCodec,
+    /// Render for each client from the camera its input sends (`serve
+    /// --interactive`, issue 20) instead of one live stream.
+    pub interactive: bool,
 }
 
 impl Default for Link {
@@ -47,22 +50,25 @@ impl Default for Link {
         Self {
             congestion: Congestion::default(),
             color: video::ColorCodec::DEFAULT_LIVE,
+            interactive: false,
         }
     }
 }
 
-/// Starts a server on 127.0.0.1 (a free port) rendering `scene` live at
-/// `size` and `fps`, its frames sent over `link`.
+/// Starts a server on 127.0.0.1 (a free port) rendering `scene` at `size`
+/// and `fps`, its frames sent over `link`: live, or for each client from
+/// its viewer's input (`link.interactive`).
 pub fn start_local(
     scene: &str,
     size: FrameSize,
     fps: f64,
     link: Link,
 ) -> anyhow::Result<LocalServer> {
+    let window = WindowSettings::default();
     start_local_from(
-        scene_spec(scene, size, fps, WindowSettings::default()),
+        scene_spec(scene, size, fps, window),
         (size, fps),
-        WindowSettings::default(),
+        window,
         link,
     )
 }
@@ -118,6 +124,7 @@ fn start_local_from(
     window: WindowSettings,
     link: Link,
 ) -> anyhow::Result<LocalServer> {
+    let interactive = link.interactive;
     let identity_dir = tempfile::tempdir()?;
     let identity = Identity::load_or_create(identity_dir.path())?;
     let token = host::session::random_token();
@@ -131,18 +138,22 @@ fn start_local_from(
         fps,
         buffers: buffers.clone(),
         window_mode: window.mode,
-        max_sessions: host::session::DEFAULT_MAX_SESSIONS,
+        max_sessions: if interactive {
+            host::session::DEFAULT_MAX_INTERACTIVE_SESSIONS
+        } else {
+            host::session::DEFAULT_MAX_SESSIONS
+        },
         congestion: link.congestion,
         effects: spec.effects()?,
     };
-    let frames = Source::channel();
-    let source = Source::start(spec, encoding, frames.clone())?;
-    let server = Server::start(
-        "127.0.0.1:0".parse()?,
-        &identity,
-        policy,
-        Feed::Live(frames),
-    )?;
+    let (feed, source) = if interactive {
+        (Feed::interactive(spec, encoding)?, None)
+    } else {
+        let frames = Source::channel();
+        let source = Source::start(spec, encoding, frames.clone())?;
+        (Feed::Live(frames), Some(source))
+    };
+    let server = Server::start("127.0.0.1:0".parse()?, &identity, policy, feed)?;
     let addr = server.local_addr()?;
     Ok(LocalServer {
         server,

@@ -6,6 +6,7 @@
 //! * [`present`]: the presentation loop, headless or into [`window`];
 //! * [`eval`]: `client eval`, quality against milliseconds for every
 //!   method and setting;
+//! * [`viewer`]: the viewer's camera (issue 20): scripted input tracks;
 //! * [`receiver`]: reassembles frames from per-frame streams, delivers them
 //!   in order, supersedes late ones and keeps the statistics the client
 //!   reports to the server.
@@ -18,6 +19,7 @@ pub mod present;
 pub mod receiver;
 pub mod reconnect;
 pub mod tls;
+pub mod viewer;
 pub mod window;
 
 pub use connect::{Arrived, ConnectConfig, ConnectError, Session, SessionStats, connect};

@@ -9,6 +9,7 @@ use client::impair::{Impairment, Relay};
 use client::present::{PresentConfig, run_headless};
 use client::{ConnectConfig, Pin};
 use framegen::Method;
+use framegen::accounting::Percentiles;
 use protocol::FrameSize;
 use protocol::dump::{DumpWriter, Manifest};
 
@@ -127,6 +128,22 @@ struct RunArgs {
     /// `h264-444[@MBIT]`; `raw` or `zstd` for research.
     #[arg(long, default_value = "h264", value_parser = clap::value_parser!(video::ColorCodec))]
     color_codec: video::ColorCodec,
+    /// The viewer drives the camera (issue 20): the client sends its input
+    /// every vsync, the server renders from it (`serve --interactive`; the
+    /// in-process server does so with this flag), and with --late-input on
+    /// every displayed frame is warped to the newest pose.
+    #[arg(long)]
+    interactive: bool,
+    /// What moves the viewer (with --interactive): `builtin:turn` (90°/s),
+    /// `builtin:look-around`, `builtin:walk` or a JSON track file (README,
+    /// "Interactive streaming").
+    #[arg(long, default_value = "builtin:turn", value_name = "TRACK")]
+    input_track: String,
+    /// Late input (with --interactive): generated frames take the newest
+    /// viewer pose instead of eq. 2, rendered frames are re-projected to
+    /// it; `off` shows the camera the server rendered.
+    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    late_input: String,
 }
 
 impl Default for RunArgs {
@@ -151,7 +168,7 @@ enum Command {
   client run                                         gffe, 320x180, 30 -> 60 fps, 5 s
   client run --method interp --size 640x360 --seconds 10
   client run --server 127.0.0.1:4433 --pin FP --token T --json report.json")]
-    Run(RunArgs),
+    Run(Box<RunArgs>),
     /// Connect to a server and receive frames.
     #[command(after_help = "Example:
   client connect --pin FINGERPRINT --token TOKEN --seconds 5 --dump-to /tmp/rx")]
@@ -295,7 +312,7 @@ fn command(cli: Cli) -> anyhow::Result<()> {
     }
     match cli.command {
         None => run(RunArgs::default()),
-        Some(Command::Run(args)) => run(args),
+        Some(Command::Run(args)) => run(*args),
         Some(Command::Connect(args)) => connect(args),
         Some(Command::Eval(args)) => eval(args),
     }
@@ -559,6 +576,7 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
     let link = client::demo::Link {
         congestion: args.congestion,
         color: args.color_codec,
+        interactive: args.interactive,
     };
     runtime.block_on(async move {
         let local = match args.server {
@@ -586,6 +604,13 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
                 ConnectConfig::new(addr, Pin::Sha256(pin), token)
             }
             (None, None) => unreachable!("a local server exists without --server"),
+        };
+        let viewer = match args.interactive {
+            true => Some(client::present::ViewerConfig {
+                track: client::viewer::InputTrack::load(&args.input_track)?,
+                late: args.late_input == "on",
+            }),
+            false => None,
         };
         let (mut session, relay) = connect_impaired(config, args.impair, args.reconnect_for).await?;
         let gpu = match args.backend.as_str() {
@@ -630,6 +655,7 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             dump_dir: args.dump_to.clone(),
             shading: !args.no_shading,
             every_stage: args.every_stage,
+            viewer,
         };
         let report = run_headless(&mut session, &config, gpu).await?;
         session.close().await;
@@ -655,6 +681,19 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             println!("  passes: {}", report.passes.join(", "));
         }
         print!("{}", report.summary.to_text());
+        let v = &report.viewer;
+        if let (Some(turn), Some(within)) = (v.vsync_turn_deg, v.within_vsync_turn()) {
+            let errors = Percentiles::of(v.view_error_deg.clone());
+            println!(
+                "  viewer ({}): {} inputs sent ({} not); displayed camera off the viewer's at present: p50 {:.2}° p99 {:.2}°, within one vsync's turn ({turn:.2}°) on {:.1} %",
+                v.mode,
+                v.inputs.sent,
+                v.inputs.unsent,
+                errors.p50,
+                errors.p99,
+                within * 100.0
+            );
+        }
         if let Some(o) = Some(report.outages).filter(|o| o.reconnects > 0 || o.in_outage) {
             println!(
                 "  outages: {} reconnects, {} failed attempts, {:.0} ms without a server (longest {:.0} ms){}",

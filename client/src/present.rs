@@ -23,13 +23,15 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use framegen::accounting::{Accounting, Percentiles, Record, Summary};
+use framegen::accounting::{Accounting, InputShown, Percentiles, Record, Summary};
 use framegen::schedule::{FrameReady, Policy, ScheduleConfig, Scheduler, Slot, SlotKind};
-use framegen::{FrameGenerator, GpuContext, Method, PushOutcome, Settings};
-use protocol::Frame;
+use framegen::{CameraSource, FrameGenerator, GpuContext, Method, PushOutcome, Settings};
+use protocol::wire::{Input, InputEcho};
+use protocol::{Frame, Pose};
 use serde::Serialize;
 
 use crate::reconnect::{Stream, StreamStats};
+use crate::viewer::{InputTrack, angle_deg};
 
 /// What the presenter does.
 #[derive(Clone, Debug)]
@@ -59,6 +61,32 @@ pub struct PresentConfig {
     /// welcome's effects are ignored: `framegen::Settings::effects` stays
     /// unknown).
     pub every_stage: bool,
+    /// An interactive run's viewer: the client sends its input every
+    /// vsync (issue 20).
+    pub viewer: Option<ViewerConfig>,
+}
+
+/// The viewer of an interactive run (issue 20).
+#[derive(Clone, Debug)]
+pub struct ViewerConfig {
+    /// What moves the viewer's camera (from the first frame's camera).
+    pub track: InputTrack,
+    /// Late input: every displayed frame is warped to the newest viewer
+    /// pose (generated frames take it instead of eq. 2, rendered ones are
+    /// re-projected to it); otherwise the display shows the camera the
+    /// server rendered from the input it had (and eq. 2 between).
+    pub late: bool,
+}
+
+impl ViewerConfig {
+    /// The mode's name in reports.
+    pub fn mode(viewer: Option<&Self>) -> &'static str {
+        match viewer {
+            None => "scripted server camera",
+            Some(v) if v.late => "late input",
+            Some(_) => "server camera from input",
+        }
+    }
 }
 
 impl Default for PresentConfig {
@@ -75,6 +103,7 @@ impl Default for PresentConfig {
             dump_dir: None,
             shading: true,
             every_stage: false,
+            viewer: None,
         }
     }
 }
@@ -127,6 +156,33 @@ pub struct Report {
     /// the stream's effects (in words in the JSON).
     #[serde(serialize_with = "in_words")]
     pub plan: framegen::pipeline::plan::Plan,
+    /// The viewer's camera against what was shown (issue 20).
+    pub viewer: ViewerReport,
+}
+
+/// How a run's displayed camera followed the viewer (issue 20).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ViewerReport {
+    /// Where the displayed camera came from ([`ViewerConfig::mode`]).
+    pub mode: String,
+    /// Viewer inputs sent, one a vsync.
+    pub inputs: Inputs,
+    /// With a viewer: the angle between each displayed frame's camera and
+    /// the viewer's at its present time, degrees (record order).
+    pub view_error_deg: Vec<f64>,
+    /// How far the viewer turns in one display interval at most, degrees.
+    pub vsync_turn_deg: Option<f64>,
+}
+
+impl ViewerReport {
+    /// The share of displayed frames whose camera was within one display
+    /// interval's turn of the viewer's at present (none without a viewer).
+    pub fn within_vsync_turn(&self) -> Option<f64> {
+        let bound = self.vsync_turn_deg? + 1e-6;
+        let n = self.view_error_deg.len();
+        (n > 0)
+            .then(|| self.view_error_deg.iter().filter(|&&e| e <= bound).count() as f64 / n as f64)
+    }
 }
 
 /// Serialises a value as its `Display` text.
@@ -142,6 +198,12 @@ pub async fn run_headless(
 ) -> anyhow::Result<Report> {
     let fps = session.welcome.fps;
     let policy = config.method.descriptor().policy;
+    let late = config.viewer.as_ref().is_some_and(|v| v.late);
+    anyhow::ensure!(
+        !late || (policy == Policy::Extrapolate && config.method != Method::Repeat),
+        "late input warps every frame to the newest pose: it needs an extrapolating method (gffe or reproject), not {}",
+        config.method.name()
+    );
     let base = match config.refresh_hz {
         Some(hz) if hz.is_finite() && hz > 0.0 => ScheduleConfig::refresh(policy, fps, hz),
         _ => ScheduleConfig::multiple(policy, fps, config.n),
@@ -226,7 +288,12 @@ pub async fn run_headless(
         ingested: VecDeque::from([(first.meta.index, Duration::ZERO)]),
         restarts: u64::from(matches!(first_outcome, PushOutcome::Restarted { .. })),
     };
+    let start_pose = first.meta.camera.pose;
     let mut kept: VecDeque<Frame> = VecDeque::from([first]);
+    // The echo of each kept frame's input (interactive streams).
+    let mut echoes: VecDeque<(u64, InputEcho)> = VecDeque::new();
+    let mut inputs = Inputs::default();
+    let mut view_error_deg = Vec::new();
     let mut generation = Vec::new();
     let mut decode_ms = Vec::new();
     // The passes of the last generated frame (ingest and generation).
@@ -256,6 +323,13 @@ pub async fn run_headless(
         if !lazy {
             pusher.push(&mut generator, arrived.iter().map(|a| &a.frame))?;
         }
+        // The viewer's input, sent at once: taken as late as it can be,
+        // after the ingest and just before this slot is generated, so
+        // that late input shows the newest pose there is.
+        let newest = config
+            .viewer
+            .as_ref()
+            .map(|v| inputs.take(session, &v.track, &start_pose, clock()));
         let since = |t: Instant| t.saturating_duration_since(start);
         for a in arrived {
             decode_ms.push(
@@ -265,6 +339,12 @@ pub async fn run_headless(
                     * 1e3,
             );
             let frame = a.frame;
+            if let Some(echo) = a.input {
+                echoes.push_back((frame.meta.index, echo));
+                if echoes.len() > KEPT {
+                    echoes.pop_front();
+                }
+            }
             scheduler.frame_ready(FrameReady {
                 id: frame.meta.index,
                 sim_time: frame.meta.time,
@@ -282,13 +362,32 @@ pub async fn run_headless(
                 let due = kept.iter().filter(|f| f.meta.index <= next.id);
                 pusher.push(&mut generator, due)?;
             }
+            // Late input warps what is shown to the newest pose: a rendered
+            // frame only while it is the generator's current one.
+            let warp = newest.filter(|_| late).filter(|_| {
+                slot.kind != SlotKind::Rendered && slot.kind != SlotKind::Repeated
+                    || pusher.last == Some(slot.source.id)
+            });
             let (image, ready_at) = produce(
                 &slot,
                 &mut generator,
                 &kept,
                 (&mut generation, &mut passes),
-                start,
+                (start, warp.map(|n| n.pose)),
             )?;
+            let shown_input = match warp {
+                Some(n) => Some(InputShown {
+                    seq: n.seq,
+                    at: n.at,
+                }),
+                None => echoes
+                    .iter()
+                    .find(|(i, _)| *i == slot.source.id)
+                    .map(|(_, e)| InputShown {
+                        seq: e.seq,
+                        at: Duration::from_micros(e.client_time_us),
+                    }),
+            };
             if let (Some(dir), Some(image)) = (&config.png_dir, &image) {
                 write_png(dir, slot.display_id, image)?;
             }
@@ -317,7 +416,17 @@ pub async fn run_headless(
             let done = clock();
             let present_at = accounting.first_vsync_after(done.max(vsync + di));
             let ingested = pusher.ingested_at(slot.source.id);
-            accounting.record(&slot, ready_at.unwrap_or(done), ingested, present_at);
+            accounting.record(
+                &slot,
+                ready_at.unwrap_or(done),
+                ingested,
+                present_at,
+                shown_input,
+            );
+            if let (Some(v), Some(image)) = (&config.viewer, &image) {
+                let at_present = v.track.pose_at(&start_pose, present_at.as_secs_f64());
+                view_error_deg.push(angle_deg(&image.meta.camera.pose, &at_present));
+            }
         }
         // Skip vsyncs that passed while this slot was prepared.
         let next = ((clock().as_secs_f64() / di.as_secs_f64()).floor() as u64).max(k + 1);
@@ -345,7 +454,65 @@ pub async fn run_headless(
         records: accounting.records().to_vec(),
         passes: passes.iter().map(|p| p.name().to_string()).collect(),
         plan,
+        viewer: ViewerReport {
+            mode: ViewerConfig::mode(config.viewer.as_ref()).into(),
+            inputs,
+            view_error_deg,
+            vsync_turn_deg: config
+                .viewer
+                .as_ref()
+                .map(|v| v.track.max_turn_deg_per_s() * di.as_secs_f64()),
+        },
     })
+}
+
+/// The newest viewer input: its sequence number, when it was taken and
+/// its pose.
+#[derive(Clone, Copy, Debug)]
+struct Newest {
+    seq: u64,
+    at: Duration,
+    pose: Pose,
+}
+
+/// The viewer inputs a run sent, and those it could not (no session).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Inputs {
+    /// Sent.
+    pub sent: u64,
+    /// Not sent.
+    pub unsent: u64,
+}
+
+impl Inputs {
+    /// Takes the viewer's input at `now` (presenter clock) from `track`
+    /// and sends it on `session`.
+    fn take(
+        &mut self,
+        session: &Stream,
+        track: &InputTrack,
+        start: &Pose,
+        now: Duration,
+    ) -> Newest {
+        let newest = Newest {
+            seq: self.sent + self.unsent + 1,
+            at: now,
+            pose: track.pose_at(start, now.as_secs_f64()),
+        };
+        let input = Input {
+            seq: newest.seq,
+            client_time_us: u64::try_from(now.as_micros()).unwrap_or(u64::MAX),
+            camera: Some(newest.pose),
+            buttons: 0,
+            axes: [0.0; 4],
+        };
+        if session.send_input(&input) {
+            self.sent += 1;
+        } else {
+            self.unsent += 1;
+        }
+        newest
+    }
 }
 
 /// Pushes rendered frames into the generator in stream order.
@@ -405,14 +572,30 @@ impl Pusher {
 
 /// The image of a slot and when it was ready (the source frame's ready
 /// time, or the end of generation). A generated slot adds its time to
-/// `generation` and leaves its passes in `passes`.
+/// `generation` and leaves its passes in `passes`. With `warp` (late
+/// input), every slot is generated with that camera: a rendered or held
+/// frame at α = 0 (re-projected, holes filled as for generated frames).
 fn produce(
     slot: &Slot,
     generator: &mut FrameGenerator,
     kept: &VecDeque<Frame>,
     (generation, passes): (&mut Vec<f64>, &mut Vec<framegen::pipeline::Pass>),
-    start: Instant,
+    (start, warp): (Instant, Option<Pose>),
 ) -> anyhow::Result<(Option<Frame>, Option<Duration>)> {
+    if let Some(pose) = warp {
+        let alpha = match slot.kind {
+            SlotKind::Rendered | SlotKind::Repeated => 0.0,
+            SlotKind::Extrapolated | SlotKind::Interpolated => slot.alpha,
+        };
+        let t = Instant::now();
+        let g = tokio::task::block_in_place(|| {
+            generator.generate_with(alpha, CameraSource::Given(pose))
+        })?;
+        generation.push(t.elapsed().as_secs_f64() * 1e3);
+        passes.clear();
+        passes.extend(generator.timings().iter().map(|p| p.pass));
+        return Ok((Some(g.frame), Some(start.elapsed())));
+    }
     match slot.kind {
         SlotKind::Rendered | SlotKind::Repeated => {
             // Its displayed region (a no-op without a widened window).

@@ -128,6 +128,8 @@ struct Shared {
     stats: StreamStats,
     /// Why the stream ended, once it has.
     ended: Option<String>,
+    /// The current session's connection (input goes out on it).
+    conn: Option<quinn::Connection>,
 }
 
 /// Frames from one server across reconnections. Frames arrive on
@@ -152,7 +154,10 @@ impl Stream {
         let session = crate::connect(config.clone()).await?;
         let welcome = session.welcome.clone();
         let (tx, frames) = mpsc::channel(config.queue.max(1));
-        let shared = Arc::new(Mutex::new(Shared::default()));
+        let shared = Arc::new(Mutex::new(Shared {
+            conn: Some(session.connection().clone()),
+            ..Shared::default()
+        }));
         let (stop, stopped) = tokio::sync::oneshot::channel();
         let task = tokio::spawn(supervise(
             session,
@@ -174,6 +179,14 @@ impl Stream {
     /// Counters across sessions.
     pub fn stats(&self) -> StreamStats {
         self.shared.lock().map(|s| s.stats).unwrap_or_default()
+    }
+
+    /// Sends the viewer's input on the current session; false while there
+    /// is none (an outage) or the datagram could not be sent. Input is
+    /// unreliable by design: the next one supersedes it.
+    pub fn send_input(&self, input: &protocol::wire::Input) -> bool {
+        let conn = self.shared.lock().ok().and_then(|s| s.conn.clone());
+        conn.is_some_and(|c| crate::connect::send_input(&c, input).is_ok())
     }
 
     /// Why the stream ended, once it has.
@@ -391,7 +404,10 @@ async fn supervise(
         };
         let lost_for = (now() - backoff.lost_at()).as_secs_f64() * 1e3;
         tracing::info!("reconnected {lost_for:.0} ms after the session was lost");
-        update(&mut |s| s.stats.reconnects += 1);
+        update(&mut |s| {
+            s.stats.reconnects += 1;
+            s.conn = Some(session.connection().clone());
+        });
         outage_since = Some(last_frame);
         renumber.new_session();
     }

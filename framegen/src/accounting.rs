@@ -61,6 +61,24 @@ pub struct Record {
     pub ms_between_presents: Option<f64>,
     /// |Δ present time − Δ simulation time shown|, ms: judder.
     pub ms_animation_error: Option<f64>,
+    /// The viewer input whose camera was shown (interactive streams,
+    /// issue 20): its sequence number.
+    pub input_seq: Option<u64>,
+    /// When that input was taken, ms.
+    pub input_ms: Option<f64>,
+    /// Input to photon: present − input time, ms.
+    pub input_to_photon_ms: Option<f64>,
+}
+
+/// The viewer input a displayed frame's camera reflects: the newest one
+/// taken when the client warps to its own pose (late input), else the one
+/// the server echoed with the rendered frame shown or generated from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InputShown {
+    /// The input's sequence number.
+    pub seq: u64,
+    /// When it was taken, on the presenter's clock.
+    pub at: Duration,
 }
 
 /// Percentiles of one quantity.
@@ -122,6 +140,9 @@ pub struct Summary {
     pub ms_between_presents: Percentiles,
     /// PresentMon MsAnimationError.
     pub ms_animation_error: Percentiles,
+    /// Input to photon of the frames whose camera reflects a viewer input
+    /// (none without input).
+    pub input_to_photon_ms: Percentiles,
     /// Frames never shown, by cause.
     pub drops: Drops,
 }
@@ -175,13 +196,15 @@ impl Accounting {
     /// Records a presented slot: `ready_at` is when its image was ready
     /// (the source's ready time for rendered and repeated slots, the end of
     /// generation for generated ones), `ingested_at` when frame generation
-    /// had ingested its source, `present_at` when it was presented.
+    /// had ingested its source, `present_at` when it was presented, and
+    /// `input` the viewer input its camera reflects, if any.
     pub fn record(
         &mut self,
         slot: &Slot,
         ready_at: Duration,
         ingested_at: Option<Duration>,
         present_at: Duration,
+        input: Option<InputShown>,
     ) {
         let sim = slot.sim_time(self.config.render_interval) * 1e3;
         let present = ms(present_at);
@@ -210,6 +233,9 @@ impl Accounting {
             added_latency_ms: added,
             ms_between_presents: between,
             ms_animation_error: animation,
+            input_seq: input.map(|i| i.seq),
+            input_ms: input.map(|i| ms(i.at)),
+            input_to_photon_ms: input.map(|i| present - ms(i.at)),
         });
     }
 
@@ -240,6 +266,7 @@ impl Accounting {
             added_latency_ms: collect(&|r| r.added_latency_ms),
             ms_between_presents: collect(&|r| r.ms_between_presents),
             ms_animation_error: collect(&|r| r.ms_animation_error),
+            input_to_photon_ms: collect(&|r| r.input_to_photon_ms),
             drops,
         }
     }
@@ -262,6 +289,9 @@ impl Summary {
         s += &p("added latency ms", &self.added_latency_ms);
         s += &p("MsBetweenPresents", &self.ms_between_presents);
         s += &p("MsAnimationError", &self.ms_animation_error);
+        if self.input_to_photon_ms.count > 0 {
+            s += &p("input to photon ms", &self.input_to_photon_ms);
+        }
         s += &format!(
             "  drops: network {}, late {}, scheduler {}\n  present = {}\n  {}\n",
             self.drops.network,
@@ -319,7 +349,7 @@ mod tests {
                         } else {
                             now
                         };
-                    acc.record(&slot, ready, Some(slot.source.ready_at), now);
+                    acc.record(&slot, ready, Some(slot.source.ready_at), now, None);
                 }
             }
             let sum = acc.summary(s.drops());
@@ -361,10 +391,43 @@ mod tests {
             let ingested = ready + Duration::from_millis(ingest_ms);
             // Shown at the first vsync after the ingest.
             let present = acc.first_vsync_after(ingested);
-            acc.record(&slot, ready, Some(ingested), present);
+            acc.record(&slot, ready, Some(ingested), present, None);
             let r = &acc.records()[0];
             assert!((r.added_latency_ms.unwrap() - added).abs() < 1e-9, "{r:?}");
             assert!(r.received_ms < r.ready_ms && r.ingested_ms.unwrap() <= r.present_ms);
         }
+    }
+
+    /// Input to photon is present − the input's time, per displayed frame
+    /// that reflects an input, and only those are summarised.
+    #[test]
+    fn input_to_photon_is_present_minus_the_input_time() {
+        let config = ScheduleConfig::multiple(Policy::Extrapolate, 30.0, 1);
+        let di = config.display_interval;
+        let mut s = Scheduler::new(config);
+        let mut acc = Accounting::new(config, Duration::ZERO, di);
+        s.frame_ready(FrameReady {
+            id: 0,
+            sim_time: 0.0,
+            host_processing: Duration::ZERO,
+            received_at: Duration::ZERO,
+            ready_at: Duration::ZERO,
+        });
+        for k in 1..=4u32 {
+            let slot = s.vsync(di * k).expect("a slot");
+            let input = (k % 2 == 0).then_some(InputShown {
+                seq: u64::from(k),
+                at: di * k - Duration::from_millis(5),
+            });
+            acc.record(&slot, di * k, None, di * (k + 1), input);
+        }
+        let r = acc.records();
+        assert_eq!(r[0].input_to_photon_ms, None);
+        let want = ms(di + Duration::from_millis(5));
+        assert!((r[1].input_to_photon_ms.unwrap() - want).abs() < 1e-9);
+        assert_eq!(r[3].input_seq, Some(4));
+        let sum = acc.summary(s.drops());
+        assert_eq!(sum.input_to_photon_ms.count, 2);
+        assert!(sum.to_text().contains("input to photon"));
     }
 }
