@@ -6,7 +6,8 @@
 #   programs also run on wgpu's OpenGL backend (llvmpipe), but the tests
 #   compare the two backends.
 # - xvfb, xauth and the X11 libraries winit loads at run time, and a font:
-#   the window presenter's test runs under a virtual X server; the overlay
+#   the window presenter's tests run under a virtual X server (xdotool
+#   drives the interactive one with synthetic mouse and keys); the overlay
 #   and the eval plots draw text.
 # - g++: nv-flip (the ꟻLIP metric) builds NVIDIA's C++ FLIP.
 # - libavcodec-dev, libavformat-dev (FFmpeg 5.1 with libx264), clang,
@@ -14,7 +15,7 @@
 #   through ffmpeg-next, whose bindings bindgen generates from the installed
 #   headers (ffmpeg-next's build instructions list clang beside
 #   libclang-dev; the build CI verified had both).
-packages="mesa-vulkan-drivers libvulkan1 xvfb xauth libx11-6 libxcursor1 libxrandr2 libxi6 libxkbcommon-x11-0 fonts-dejavu-core g++ libavcodec-dev libavformat-dev clang libclang-dev pkg-config"
+packages="mesa-vulkan-drivers libvulkan1 xvfb xauth xdotool libx11-6 libxcursor1 libxrandr2 libxi6 libxkbcommon-x11-0 fonts-dejavu-core g++ libavcodec-dev libavformat-dev clang libclang-dev pkg-config"
 # shellcheck disable=SC2086
 if ! dpkg -s $packages >/dev/null 2>&1; then
   if [ "$(id -u)" = 0 ]; then

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, Parser, Subcommand};
 use client::impair::{Impairment, Relay};
-use client::present::{PresentConfig, run_headless};
+use client::present::{PresentConfig, ViewerSource, run_headless};
 use client::{ConnectConfig, Pin};
 use framegen::Method;
 use framegen::accounting::Percentiles;
@@ -137,8 +137,10 @@ struct RunArgs {
     /// What moves the viewer (with --interactive): `builtin:turn` (90°/s),
     /// `builtin:look-around`, `builtin:walk` or a JSON track file (README,
     /// "Interactive streaming").
-    #[arg(long, default_value = "builtin:turn", value_name = "TRACK")]
-    input_track: String,
+    /// Default: the window's mouse and keys in a window, `builtin:turn`
+    /// headless.
+    #[arg(long, value_name = "TRACK")]
+    input_track: Option<String>,
     /// Late input (with --interactive): generated frames take the newest
     /// viewer pose instead of eq. 2, rendered frames are re-projected to
     /// it; `off` shows the camera the server rendered.
@@ -551,16 +553,19 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
         None
     };
     let Some(event_loop) = event_loop else {
-        return session(args, None);
+        return session(args, None, None);
     };
     let proxy = event_loop.create_proxy();
     let screenshot = args.screenshot.clone();
+    // An interactive window is driven by its mouse and keys.
+    let live = args.interactive.then(client::viewer::LiveViewer::default);
+    let keys = live.clone();
     let worker = std::thread::spawn(move || {
-        let result = session(args, Some(proxy.clone()));
+        let result = session(args, Some(proxy.clone()), live);
         let _ = proxy.send_event(client::window::Event::Done);
         result
     });
-    let shown = client::window::run(event_loop, screenshot);
+    let shown = client::window::run(event_loop, screenshot, keys);
     let result = worker
         .join()
         .map_err(|_| anyhow::anyhow!("the presenter thread panicked"))?;
@@ -569,7 +574,11 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
 
 /// Connects (starting the in-process server if needed), presents, and
 /// prints the latency summary.
-fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Result<()> {
+fn session(
+    args: RunArgs,
+    window: Option<client::window::Sink>,
+    live: Option<client::viewer::LiveViewer>,
+) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
@@ -605,13 +614,18 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
             }
             (None, None) => unreachable!("a local server exists without --server"),
         };
-        let viewer = match args.interactive {
-            true => Some(client::present::ViewerConfig {
-                track: client::viewer::InputTrack::load(&args.input_track)?,
-                late: args.late_input == "on",
-            }),
-            false => None,
-        };
+        let viewer = match (args.interactive, args.input_track.as_deref(), live) {
+            (false, _, _) => None,
+            // A window's mouse and keys, unless a track is given.
+            (true, None, Some(live)) => Some(ViewerSource::Live(live)),
+            (true, track, _) => Some(ViewerSource::Track(client::viewer::InputTrack::load(
+                track.unwrap_or("builtin:turn"),
+            )?)),
+        }
+        .map(|source| client::present::ViewerConfig {
+            source,
+            late: args.late_input == "on",
+        });
         let (mut session, relay) = connect_impaired(config, args.impair, args.reconnect_for).await?;
         let gpu = match args.backend.as_str() {
             "cpu" => None,
@@ -682,13 +696,16 @@ fn session(args: RunArgs, window: Option<client::window::Sink>) -> anyhow::Resul
         }
         print!("{}", report.summary.to_text());
         let v = &report.viewer;
+        if args.interactive {
+            println!(
+                "  viewer ({}): {} inputs sent ({} not); the last turned {:.1}° and moved {:.2} m from the first frame's camera",
+                v.mode, v.inputs.sent, v.inputs.unsent, v.turned_deg, v.moved_m
+            );
+        }
         if let (Some(turn), Some(within)) = (v.vsync_turn_deg, v.within_vsync_turn()) {
             let errors = Percentiles::of(v.view_error_deg.clone());
             println!(
-                "  viewer ({}): {} inputs sent ({} not); displayed camera off the viewer's at present: p50 {:.2}° p99 {:.2}°, within one vsync's turn ({turn:.2}°) on {:.1} %",
-                v.mode,
-                v.inputs.sent,
-                v.inputs.unsent,
+                "  displayed camera off the viewer's at present: p50 {:.2}° p99 {:.2}°, within one vsync's turn ({turn:.2}°) on {:.1} %",
                 errors.p50,
                 errors.p99,
                 within * 100.0

@@ -31,7 +31,7 @@ use protocol::{Frame, Pose};
 use serde::Serialize;
 
 use crate::reconnect::{Stream, StreamStats};
-use crate::viewer::{InputTrack, angle_deg};
+use crate::viewer::{InputTrack, LiveViewer, angle_deg};
 
 /// What the presenter does.
 #[derive(Clone, Debug)]
@@ -70,12 +70,32 @@ pub struct PresentConfig {
 #[derive(Clone, Debug)]
 pub struct ViewerConfig {
     /// What moves the viewer's camera (from the first frame's camera).
-    pub track: InputTrack,
+    pub source: ViewerSource,
     /// Late input: every displayed frame is warped to the newest viewer
     /// pose (generated frames take it instead of eq. 2, rendered ones are
     /// re-projected to it); otherwise the display shows the camera the
     /// server rendered from the input it had (and eq. 2 between).
     pub late: bool,
+}
+
+/// What moves the viewer's camera.
+#[derive(Clone, Debug)]
+pub enum ViewerSource {
+    /// A scripted track (headless runs, tests).
+    Track(InputTrack),
+    /// The window's mouse and keys.
+    Live(LiveViewer),
+}
+
+impl ViewerSource {
+    /// The viewer's camera at `now` (`since` after the presenter's start)
+    /// from `start`.
+    fn pose(&self, start: &Pose, since: Duration, now: Instant) -> Pose {
+        match self {
+            ViewerSource::Track(track) => track.pose_at(start, since.as_secs_f64()),
+            ViewerSource::Live(live) => live.pose_at(now).unwrap_or(*start),
+        }
+    }
 }
 
 impl ViewerConfig {
@@ -167,11 +187,18 @@ pub struct ViewerReport {
     pub mode: String,
     /// Viewer inputs sent, one a vsync.
     pub inputs: Inputs,
-    /// With a viewer: the angle between each displayed frame's camera and
-    /// the viewer's at its present time, degrees (record order).
+    /// With a scripted viewer: the angle between each displayed frame's
+    /// camera and the viewer's at its present time, degrees (record
+    /// order).
     pub view_error_deg: Vec<f64>,
-    /// How far the viewer turns in one display interval at most, degrees.
+    /// How far a scripted viewer turns in one display interval at most,
+    /// degrees.
     pub vsync_turn_deg: Option<f64>,
+    /// How far the viewer's last input had turned from the first frame's
+    /// camera, degrees, and moved from it, metres.
+    pub turned_deg: f64,
+    /// See [`ViewerReport::turned_deg`].
+    pub moved_m: f64,
 }
 
 impl ViewerReport {
@@ -289,6 +316,9 @@ pub async fn run_headless(
         restarts: u64::from(matches!(first_outcome, PushOutcome::Restarted { .. })),
     };
     let start_pose = first.meta.camera.pose;
+    if let Some(ViewerSource::Live(live)) = config.viewer.as_ref().map(|v| &v.source) {
+        live.begin(start_pose, start);
+    }
     let mut kept: VecDeque<Frame> = VecDeque::from([first]);
     // The echo of each kept frame's input (interactive streams).
     let mut echoes: VecDeque<(u64, InputEcho)> = VecDeque::new();
@@ -326,10 +356,10 @@ pub async fn run_headless(
         // The viewer's input, sent at once: taken as late as it can be,
         // after the ingest and just before this slot is generated, so
         // that late input shows the newest pose there is.
-        let newest = config
-            .viewer
-            .as_ref()
-            .map(|v| inputs.take(session, &v.track, &start_pose, clock()));
+        let newest = config.viewer.as_ref().map(|v| {
+            let pose = v.source.pose(&start_pose, clock(), Instant::now());
+            inputs.send(session, pose, clock())
+        });
         let since = |t: Instant| t.saturating_duration_since(start);
         for a in arrived {
             decode_ms.push(
@@ -400,7 +430,7 @@ pub async fn run_headless(
             }
             if let (Some(sink), Some(image)) = (&config.window, &image) {
                 let link = session.stats().session;
-                let stats = overlay(
+                let mut stats = overlay(
                     &accounting,
                     received,
                     clock(),
@@ -408,6 +438,19 @@ pub async fn run_headless(
                     (link.client.rtt_us as f64 / 1000.0, link.color_errors),
                     scheduler.drops(),
                 );
+                if let Some(v) = &config.viewer {
+                    let ip = accounting.summary(scheduler.drops()).input_to_photon_ms;
+                    stats += &format!(
+                        "\n{}: input to photon p50 {:5.2} ms   p99 {:5.2} ms",
+                        ViewerConfig::mode(Some(v)),
+                        ip.p50,
+                        ip.p99
+                    );
+                    if matches!(v.source, ViewerSource::Live(_)) {
+                        stats.push('\n');
+                        stats += crate::viewer::BINDINGS;
+                    }
+                }
                 if !send_to_window(sink, image, stats) {
                     // The window was closed: the session ends.
                     break;
@@ -423,8 +466,10 @@ pub async fn run_headless(
                 present_at,
                 shown_input,
             );
-            if let (Some(v), Some(image)) = (&config.viewer, &image) {
-                let at_present = v.track.pose_at(&start_pose, present_at.as_secs_f64());
+            if let (Some(ViewerSource::Track(track)), Some(image)) =
+                (config.viewer.as_ref().map(|v| &v.source), &image)
+            {
+                let at_present = track.pose_at(&start_pose, present_at.as_secs_f64());
                 view_error_deg.push(angle_deg(&image.meta.camera.pose, &at_present));
             }
         }
@@ -456,12 +501,16 @@ pub async fn run_headless(
         plan,
         viewer: ViewerReport {
             mode: ViewerConfig::mode(config.viewer.as_ref()).into(),
+            turned_deg: inputs.last.map_or(0.0, |p| angle_deg(&start_pose, &p)),
+            moved_m: inputs
+                .last
+                .map_or(0.0, |p| (p.position - start_pose.position).length()),
             inputs,
             view_error_deg,
-            vsync_turn_deg: config
-                .viewer
-                .as_ref()
-                .map(|v| v.track.max_turn_deg_per_s() * di.as_secs_f64()),
+            vsync_turn_deg: match config.viewer.as_ref().map(|v| &v.source) {
+                Some(ViewerSource::Track(t)) => Some(t.max_turn_deg_per_s() * di.as_secs_f64()),
+                _ => None,
+            },
         },
     })
 }
@@ -482,23 +531,21 @@ pub struct Inputs {
     pub sent: u64,
     /// Not sent.
     pub unsent: u64,
+    /// The last input's pose.
+    #[serde(skip)]
+    last: Option<Pose>,
 }
 
 impl Inputs {
-    /// Takes the viewer's input at `now` (presenter clock) from `track`
-    /// and sends it on `session`.
-    fn take(
-        &mut self,
-        session: &Stream,
-        track: &InputTrack,
-        start: &Pose,
-        now: Duration,
-    ) -> Newest {
+    /// Sends the viewer's `pose`, taken at `now` (presenter clock), on
+    /// `session`.
+    fn send(&mut self, session: &Stream, pose: Pose, now: Duration) -> Newest {
         let newest = Newest {
             seq: self.sent + self.unsent + 1,
             at: now,
-            pose: track.pose_at(start, now.as_secs_f64()),
+            pose,
         };
+        self.last = Some(pose);
         let input = Input {
             seq: newest.seq,
             client_time_us: u64::try_from(now.as_micros()).unwrap_or(u64::MAX),

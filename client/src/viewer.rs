@@ -2,14 +2,20 @@
 //! as a headless run or a test drives it, turned into poses the client
 //! sends to an interactive server and warps its frames to.
 //!
+//! In a window, [`LiveViewer`] does the same from the mouse and keys (the
+//! usual game bindings: drag with the left button to look, W/A/S/D to move,
+//! Space and C up and down, Shift to run).
+//!
 //! A track moves a game camera from where the stream starts (the first
 //! frame's camera): it turns about the world's vertical (yaw), tilts about
-//! its own right axis (pitch, kept within ±89°) and moves along the start
+//! its own right axis (pitch, kept within ±89° of the start's) and moves along the start
 //! camera's axes, each at a constant rate per segment. Poses are exact at
 //! any time (no integration steps): yaw and pitch are piecewise linear, the
 //! position too.
 
 use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 use glam::{DQuat, DVec3};
 use protocol::Pose;
@@ -177,12 +183,9 @@ impl InputTrack {
     /// The viewer's camera `t` seconds after `start`.
     pub fn pose_at(&self, start: &Pose, t: f64) -> Pose {
         let (yaw, pitch, moved) = self.state_at(t);
-        let rotation = DQuat::from_rotation_y(yaw.to_radians())
-            * start.rotation
-            * DQuat::from_rotation_x(pitch.to_radians());
         Pose::new(
             start.position + start.rotation * moved,
-            rotation.normalize(),
+            turned(start, yaw, pitch),
         )
     }
 
@@ -193,6 +196,137 @@ impl InputTrack {
             .iter()
             .map(|s| s.yaw_deg_per_s.hypot(s.pitch_deg_per_s))
             .fold(0.0, f64::max)
+    }
+}
+
+/// `start`'s orientation turned by `yaw` about the vertical and tilted by
+/// `pitch` about its own right axis (degrees).
+fn turned(start: &Pose, yaw: f64, pitch: f64) -> DQuat {
+    (DQuat::from_rotation_y(yaw.to_radians())
+        * start.rotation
+        * DQuat::from_rotation_x(pitch.to_radians()))
+    .normalize()
+}
+
+/// A movement key of the window's viewer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MoveKey {
+    /// W.
+    Forward,
+    /// S.
+    Back,
+    /// A.
+    Left,
+    /// D.
+    Right,
+    /// Space.
+    Up,
+    /// C.
+    Down,
+    /// Shift: three times as fast.
+    Run,
+}
+
+/// The window's bindings, as its overlay shows them.
+pub const BINDINGS: &str = "drag: look   W/A/S/D: move   Space/C: up/down   Shift: run";
+
+/// Walking speed of the window's viewer, m/s (a game's default).
+pub const WALK_SPEED: f64 = 3.0;
+/// Degrees of turn per pixel the mouse is dragged.
+pub const LOOK_DEG_PER_PIXEL: f64 = 0.15;
+
+/// The window's viewer: the window feeds it mouse drags and keys, the
+/// presenter takes its pose every vsync. Movement follows the current
+/// heading; held keys move it at [`WALK_SPEED`] until released.
+#[derive(Clone, Debug, Default)]
+pub struct LiveViewer(Arc<Mutex<LiveState>>);
+
+#[derive(Debug, Default)]
+struct LiveState {
+    /// The stream's first camera, once there is one.
+    start: Option<Pose>,
+    yaw: f64,
+    pitch: f64,
+    /// Displacement in world space from the start.
+    moved: DVec3,
+    held: Vec<MoveKey>,
+    /// When `moved` was last brought up to date.
+    since: Option<Instant>,
+}
+
+impl LiveState {
+    /// Moves on to `now` with the keys held since the last update.
+    fn advance(&mut self, now: Instant) {
+        let Some(start) = self.start else {
+            return;
+        };
+        let dt = self
+            .since
+            .map_or(0.0, |s| now.saturating_duration_since(s).as_secs_f64());
+        self.since = Some(now);
+        let axis = |k, v: DVec3| {
+            if self.held.contains(&k) {
+                v
+            } else {
+                DVec3::ZERO
+            }
+        };
+        let local = axis(MoveKey::Forward, DVec3::NEG_Z)
+            + axis(MoveKey::Back, DVec3::Z)
+            + axis(MoveKey::Left, DVec3::NEG_X)
+            + axis(MoveKey::Right, DVec3::X);
+        let vertical = axis(MoveKey::Up, DVec3::Y) + axis(MoveKey::Down, DVec3::NEG_Y);
+        let speed = WALK_SPEED
+            * if self.held.contains(&MoveKey::Run) {
+                3.0
+            } else {
+                1.0
+            };
+        let heading = turned(&start, self.yaw, self.pitch);
+        let velocity = (heading * local.normalize_or_zero() + vertical) * speed;
+        self.moved += velocity * dt;
+    }
+}
+
+impl LiveViewer {
+    fn state(&self) -> std::sync::MutexGuard<'_, LiveState> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The mouse was dragged by `dx`, `dy` pixels (right, down).
+    pub fn look(&self, dx: f64, dy: f64) {
+        let mut s = self.state();
+        s.yaw -= dx * LOOK_DEG_PER_PIXEL;
+        s.pitch = (s.pitch - dy * LOOK_DEG_PER_PIXEL).clamp(-PITCH_LIMIT_DEG, PITCH_LIMIT_DEG);
+    }
+
+    /// The viewer starts from `start` (the stream's first camera), and
+    /// moves from `now` on.
+    pub fn begin(&self, start: Pose, now: Instant) {
+        let mut s = self.state();
+        s.start = Some(start);
+        s.since = Some(now);
+    }
+
+    /// `key` went down or up at `now`.
+    pub fn key(&self, key: MoveKey, down: bool, now: Instant) {
+        let mut s = self.state();
+        s.advance(now);
+        s.held.retain(|&k| k != key);
+        if down {
+            s.held.push(key);
+        }
+    }
+
+    /// The viewer's camera at `now`, once it has begun.
+    pub fn pose_at(&self, now: Instant) -> Option<Pose> {
+        let mut s = self.state();
+        s.advance(now);
+        let start = s.start?;
+        Some(Pose::new(
+            start.position + s.moved,
+            turned(&start, s.yaw, s.pitch),
+        ))
     }
 }
 
@@ -255,6 +389,42 @@ mod tests {
         // Pitch stops at 89°.
         assert!((angle_deg(&s, &end) - 89.0).abs() < 1e-6);
         assert_eq!(end, track.pose_at(&s, 50.0));
+    }
+
+    #[test]
+    fn the_live_viewer_looks_and_walks_along_its_heading() {
+        let viewer = LiveViewer::default();
+        // Level, so that pitch is elevation.
+        let s = Pose::look_at(
+            DVec3::new(0.0, 1.7, 5.0),
+            DVec3::new(0.0, 1.7, 0.0),
+            DVec3::Y,
+        );
+        let t0 = Instant::now();
+        let at = |ms| t0 + std::time::Duration::from_millis(ms);
+        assert_eq!(viewer.pose_at(t0), None);
+        // Keys before the stream starts move nothing.
+        viewer.key(MoveKey::Forward, true, t0);
+        viewer.begin(s, at(1000));
+        viewer.key(MoveKey::Forward, false, at(1000));
+        assert_eq!(
+            viewer.pose_at(at(1000)),
+            Some(Pose::new(s.position, s.rotation.normalize()))
+        );
+        // Dragged 600 px to the right: 90° to the right.
+        viewer.look(600.0, 0.0);
+        let p = viewer.pose_at(at(1000)).unwrap();
+        assert!((angle_deg(&s, &p) - 90.0).abs() < 1e-9);
+        // W held for half a second: 1.5 m along the new heading.
+        viewer.key(MoveKey::Forward, true, at(1000));
+        viewer.key(MoveKey::Forward, false, at(1500));
+        let p = viewer.pose_at(at(3000)).unwrap();
+        let heading = p.rotation * DVec3::NEG_Z;
+        assert!((p.position - (s.position + 1.5 * heading)).length() < 1e-9);
+        // Dragging far up stops at the pitch limit.
+        viewer.look(0.0, -1e5);
+        let up = viewer.pose_at(at(3000)).unwrap().rotation * DVec3::NEG_Z;
+        assert!((up.y.asin().to_degrees() - 89.0).abs() < 1.0, "{up}");
     }
 
     #[test]

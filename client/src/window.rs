@@ -2,7 +2,9 @@
 //! presented frames (display-encoded by the presenter: exposure 1,
 //! Reinhard, sRGB) and a stats overlay in the spirit of Moonlight's,
 //! toggled with `O` (text by `glyphon`). `Esc` or closing the window ends
-//! the session.
+//! the session. In an interactive session the mouse and keys drive the
+//! viewer ([`crate::viewer::LiveViewer`]: drag with the left button to
+//! look, W/A/S/D to move, Space and C up and down, Shift to run).
 //!
 //! Each frame is drawn into an offscreen target of the surface's format
 //! (image, then overlay), which is then drawn onto the surface; the same
@@ -13,10 +15,12 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use winit::application::ApplicationHandler;
-use winit::event::{ElementState, KeyEvent, WindowEvent};
+use winit::event::{ElementState, KeyEvent, MouseButton, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, EventLoop, EventLoopProxy};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
+
+use crate::viewer::{LiveViewer, MoveKey};
 
 /// What the presenter sends the window.
 #[derive(Debug)]
@@ -46,7 +50,12 @@ pub fn event_loop() -> anyhow::Result<EventLoop<Event>> {
 
 /// Runs the window until the session ends or the user closes it. With
 /// `screenshot`, the last drawn frame (overlay included) is saved there.
-pub fn run(event_loop: EventLoop<Event>, screenshot: Option<PathBuf>) -> anyhow::Result<()> {
+/// With `viewer`, its mouse and keys drive that viewer.
+pub fn run(
+    event_loop: EventLoop<Event>,
+    screenshot: Option<PathBuf>,
+    viewer: Option<LiveViewer>,
+) -> anyhow::Result<()> {
     let mut app = App {
         window: None,
         gfx: None,
@@ -54,6 +63,8 @@ pub fn run(event_loop: EventLoop<Event>, screenshot: Option<PathBuf>) -> anyhow:
         overlay: true,
         screenshot,
         error: None,
+        viewer,
+        dragging: None,
     };
     event_loop.run_app(&mut app)?;
     match app.error {
@@ -69,6 +80,27 @@ struct App {
     overlay: bool,
     screenshot: Option<PathBuf>,
     error: Option<anyhow::Error>,
+    /// The interactive session's viewer.
+    viewer: Option<LiveViewer>,
+    /// While the left button is held: the cursor's last position.
+    dragging: Option<Option<(f64, f64)>>,
+}
+
+/// The viewer's movement key for a key's text, if it is one.
+fn move_key(key: &Key) -> Option<MoveKey> {
+    Some(match key {
+        Key::Named(NamedKey::Space) => MoveKey::Up,
+        Key::Named(NamedKey::Shift) => MoveKey::Run,
+        Key::Character(c) => match c.to_ascii_lowercase().as_str() {
+            "w" => MoveKey::Forward,
+            "s" => MoveKey::Back,
+            "a" => MoveKey::Left,
+            "d" => MoveKey::Right,
+            "c" => MoveKey::Down,
+            _ => return None,
+        },
+        _ => return None,
+    })
 }
 
 impl App {
@@ -93,7 +125,11 @@ impl ApplicationHandler<Event> for App {
             return;
         }
         let attrs = Window::default_attributes()
-            .with_title("framegen client (O: overlay, Esc: quit)")
+            .with_title(if self.viewer.is_some() {
+                "framegen client (drag: look, W/A/S/D: move, O: overlay, Esc: quit)"
+            } else {
+                "framegen client (O: overlay, Esc: quit)"
+            })
             .with_inner_size(winit::dpi::PhysicalSize::new(960u32, 540u32));
         let result = el
             .create_window(attrs)
@@ -141,6 +177,54 @@ impl ApplicationHandler<Event> for App {
     }
 
     fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        if let Some(viewer) = &self.viewer {
+            match &event {
+                WindowEvent::KeyboardInput {
+                    event:
+                        KeyEvent {
+                            logical_key, state, ..
+                        },
+                    ..
+                } => {
+                    if let Some(key) = move_key(logical_key) {
+                        let down = *state == ElementState::Pressed;
+                        viewer.key(key, down, std::time::Instant::now());
+                    }
+                }
+                WindowEvent::MouseInput {
+                    state,
+                    button: MouseButton::Left,
+                    ..
+                } => {
+                    self.dragging = (*state == ElementState::Pressed).then_some(None);
+                }
+                WindowEvent::CursorMoved { position, .. } => {
+                    if let Some(last) = &mut self.dragging {
+                        if let Some((x, y)) = *last {
+                            viewer.look(position.x - x, position.y - y);
+                        }
+                        *last = Some((position.x, position.y));
+                    }
+                }
+                WindowEvent::Focused(false) => {
+                    // Keys released elsewhere never come back as releases.
+                    let now = std::time::Instant::now();
+                    for key in [
+                        MoveKey::Forward,
+                        MoveKey::Back,
+                        MoveKey::Left,
+                        MoveKey::Right,
+                        MoveKey::Up,
+                        MoveKey::Down,
+                        MoveKey::Run,
+                    ] {
+                        viewer.key(key, false, now);
+                    }
+                    self.dragging = None;
+                }
+                _ => {}
+            }
+        }
         match event {
             WindowEvent::CloseRequested => el.exit(),
             WindowEvent::KeyboardInput {

@@ -1,6 +1,8 @@
 //! The window presenter under a virtual X server (`xvfb-run`, installed by
 //! `.ci/run`): the client runs its demo for two seconds in a window and
-//! saves a screenshot, which must show a picture and the stats overlay.
+//! saves a screenshot, which must show a picture and the stats overlay; in
+//! an interactive session, synthetic mouse drags and keys (`xdotool`) turn
+//! and move the viewer's camera.
 
 use std::process::Command;
 
@@ -16,27 +18,92 @@ fn the_window_shows_frames_on_opengl() {
     shows_frames_and_the_overlay(Some("gl"));
 }
 
-fn shows_frames_and_the_overlay(backend: Option<&str>) {
-    // One virtual X server at a time: `xvfb-run -a` races for a free
-    // display number when two start together.
-    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+/// One virtual X server at a time: `xvfb-run -a` races for a free display
+/// number when two start together.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Fails with the package to install when `tool` is missing.
+fn needs(tool: &str, package: &str) {
     let which = Command::new("sh")
-        .args(["-c", "command -v xvfb-run"])
+        .args(["-c", &format!("command -v {tool}")])
         .output()
         .unwrap();
     assert!(
         which.status.success(),
-        "xvfb-run is not installed (apt-get install xvfb; .ci/run does)"
+        "{tool} is not installed (apt-get install {package}; .ci/run does)"
     );
+}
+
+/// Runs `cmd`; its standard output, once it succeeded.
+fn succeeded(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "client failed:\n{stdout}\n{stderr}");
+    stdout
+}
+
+/// An interactive session in a window (issue 20): dragging the mouse 200
+/// pixels to the right with the left button held turns the viewer 30° (at
+/// 0.15° a pixel), holding W for a second walks it 3 m; the report's last
+/// input shows both, and the overlay names the bindings.
+#[test]
+fn mouse_and_keys_drive_the_viewer_in_a_window() {
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+    needs("xvfb-run", "xvfb");
+    needs("xdotool", "xdotool");
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("report.json");
+    // The client in the background; once its window is up, a drag and a
+    // key held, then wait for the client to finish.
+    let script = r#"
+        "$0" run --window on --interactive --seconds 8 --size 160x90 --backend cpu --json "$1" &
+        client=$!
+        window=$(timeout 30 xdotool search --sync --name "framegen client" | head -1)
+        sleep 3
+        xdotool windowfocus "$window"
+        xdotool mousemove --window "$window" 300 250 mousedown 1
+        for step in 1 2 3 4 5 6 7 8 9 10; do
+            xdotool mousemove_relative -- 20 0
+            sleep 0.05
+        done
+        xdotool mouseup 1 keydown w
+        sleep 1
+        xdotool keyup w
+        wait $client
+    "#;
+    let stdout = succeeded(
+        Command::new("xvfb-run")
+            .args(["-a", "-s", "-screen 0 1280x720x24", "sh", "-c", script])
+            .arg(env!("CARGO_BIN_EXE_client"))
+            .arg(&report),
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&report).expect("report written")).unwrap();
+    let viewer = &json["viewer"];
+    assert_eq!(viewer["mode"], "late input", "{viewer}");
+    let turned = viewer["turned_deg"].as_f64().unwrap();
+    let moved = viewer["moved_m"].as_f64().unwrap();
+    // The first motion of a drag only places the cursor: 180-200 px.
+    assert!(
+        (26.0..=31.0).contains(&turned),
+        "turned {turned}°: {stdout}"
+    );
+    // A second of W at 3 m/s, give or take the event timing.
+    assert!((2.0..=4.0).contains(&moved), "moved {moved} m: {stdout}");
+    assert!(viewer["inputs"]["sent"].as_u64().unwrap() > 10, "{viewer}");
+}
+
+fn shows_frames_and_the_overlay(backend: Option<&str>) {
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+    needs("xvfb-run", "xvfb");
     let dir = tempfile::tempdir().unwrap();
     let shot = dir.path().join("window.png");
     let mut cmd = Command::new("xvfb-run");
     if let Some(b) = backend {
         cmd.env("WGPU_BACKEND", b);
     }
-    let out = cmd
-        .args(["-a", "-s", "-screen 0 1280x720x24"])
+    cmd.args(["-a", "-s", "-screen 0 1280x720x24"])
         .arg(env!("CARGO_BIN_EXE_client"))
         .args([
             "run",
@@ -50,12 +117,8 @@ fn shows_frames_and_the_overlay(backend: Option<&str>) {
             "cpu",
         ])
         .arg("--screenshot")
-        .arg(&shot)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "client failed:\n{stdout}\n{stderr}");
+        .arg(&shot);
+    let stdout = succeeded(&mut cmd);
     assert!(stdout.contains("presenting in a window"), "{stdout}");
     assert!(stdout.contains("MsBetweenPresents"), "{stdout}");
 

@@ -353,7 +353,9 @@ async fn late_input_shows_the_newest_viewer_pose() {
             duration: Duration::from_secs(3),
             cpu: true,
             viewer: Some(client::present::ViewerConfig {
-                track: client::viewer::InputTrack::builtin("turn").unwrap(),
+                source: client::present::ViewerSource::Track(
+                    client::viewer::InputTrack::builtin("turn").unwrap(),
+                ),
                 late,
             }),
             ..PresentConfig::default()
