@@ -89,11 +89,11 @@ pub enum ViewerSource {
 
 impl ViewerSource {
     /// The viewer's camera at `now` (`since` after the presenter's start)
-    /// from `start`.
-    fn pose(&self, start: &Pose, since: Duration, now: Instant) -> Pose {
+    /// from `start`, and the buttons held.
+    fn input(&self, start: &Pose, since: Duration, now: Instant) -> (Pose, u32) {
         match self {
-            ViewerSource::Track(track) => track.pose_at(start, since.as_secs_f64()),
-            ViewerSource::Live(live) => live.pose_at(now).unwrap_or(*start),
+            ViewerSource::Track(track) => (track.pose_at(start, since.as_secs_f64()), 0),
+            ViewerSource::Live(live) => (live.pose_at(now).unwrap_or(*start), live.buttons()),
         }
     }
 }
@@ -357,8 +357,8 @@ pub async fn run_headless(
         // after the ingest and just before this slot is generated, so
         // that late input shows the newest pose there is.
         let newest = config.viewer.as_ref().map(|v| {
-            let pose = v.source.pose(&start_pose, clock(), Instant::now());
-            inputs.send(session, pose, clock())
+            let (pose, buttons) = v.source.input(&start_pose, clock(), Instant::now());
+            inputs.send(session, (pose, buttons), clock())
         });
         let since = |t: Instant| t.saturating_duration_since(start);
         for a in arrived {
@@ -537,9 +537,9 @@ pub struct Inputs {
 }
 
 impl Inputs {
-    /// Sends the viewer's `pose`, taken at `now` (presenter clock), on
-    /// `session`.
-    fn send(&mut self, session: &Stream, pose: Pose, now: Duration) -> Newest {
+    /// Sends the viewer's `pose` and `buttons`, taken at `now` (presenter
+    /// clock), on `session`.
+    fn send(&mut self, session: &Stream, (pose, buttons): (Pose, u32), now: Duration) -> Newest {
         let newest = Newest {
             seq: self.sent + self.unsent + 1,
             at: now,
@@ -550,7 +550,7 @@ impl Inputs {
             seq: newest.seq,
             client_time_us: u64::try_from(now.as_micros()).unwrap_or(u64::MAX),
             camera: Some(newest.pose),
-            buttons: 0,
+            buttons,
             axes: [0.0; 4],
         };
         if session.send_input(&input) {

@@ -208,7 +208,8 @@ fn turned(start: &Pose, yaw: f64, pitch: f64) -> DQuat {
     .normalize()
 }
 
-/// A movement key of the window's viewer.
+/// A movement key of the window's viewer; held, it sets bit
+/// `1 << key as u32` of the input's `buttons`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MoveKey {
     /// W.
@@ -318,6 +319,14 @@ impl LiveViewer {
         }
     }
 
+    /// The movement keys held, as the input's button bits.
+    pub fn buttons(&self) -> u32 {
+        self.state()
+            .held
+            .iter()
+            .fold(0, |bits, &k| bits | 1 << k as u32)
+    }
+
     /// The viewer's camera at `now`, once it has begun.
     pub fn pose_at(&self, now: Instant) -> Option<Pose> {
         let mut s = self.state();
@@ -417,7 +426,11 @@ mod tests {
         assert!((angle_deg(&s, &p) - 90.0).abs() < 1e-9);
         // W held for half a second: 1.5 m along the new heading.
         viewer.key(MoveKey::Forward, true, at(1000));
+        viewer.key(MoveKey::Run, true, at(1000));
+        viewer.key(MoveKey::Run, false, at(1000));
+        assert_eq!(viewer.buttons(), 1 << MoveKey::Forward as u32);
         viewer.key(MoveKey::Forward, false, at(1500));
+        assert_eq!(viewer.buttons(), 0);
         let p = viewer.pose_at(at(3000)).unwrap();
         let heading = p.rotation * DVec3::NEG_Z;
         assert!((p.position - (s.position + 1.5 * heading)).length() < 1e-9);

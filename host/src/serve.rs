@@ -421,9 +421,12 @@ async fn connection(
         session_id,
         held_back = client.held_back.load(Ordering::Relaxed),
         keyframe_requests = client.keyframe_requests.load(Ordering::Relaxed),
-        input = ?client.input.lock().map(|c| *c).unwrap_or_default(),
         "session counters"
     );
+    let input = client.input.lock().map(|c| *c).unwrap_or_default();
+    if input != InputCounts::default() {
+        tracing::info!(session_id, ?input, "viewer input");
+    }
     control.abort();
     datagrams.abort();
     result
