@@ -357,8 +357,9 @@ pub async fn run_headless(
         // after the ingest and just before this slot is generated, so
         // that late input shows the newest pose there is.
         let newest = config.viewer.as_ref().map(|v| {
-            let (pose, buttons) = v.source.input(&start_pose, clock(), Instant::now());
-            inputs.send(session, (pose, buttons), clock())
+            let (now, at) = (Instant::now(), clock());
+            let (pose, buttons) = v.source.input(&start_pose, at, now);
+            inputs.send(session, (pose, buttons), at)
         });
         let since = |t: Instant| t.saturating_duration_since(start);
         for a in arrived {
@@ -629,39 +630,30 @@ fn produce(
     (generation, passes): (&mut Vec<f64>, &mut Vec<framegen::pipeline::Pass>),
     (start, warp): (Instant, Option<Pose>),
 ) -> anyhow::Result<(Option<Frame>, Option<Duration>)> {
-    if let Some(pose) = warp {
-        let alpha = match slot.kind {
-            SlotKind::Rendered | SlotKind::Repeated => 0.0,
-            SlotKind::Extrapolated | SlotKind::Interpolated => slot.alpha,
+    let generated = matches!(slot.kind, SlotKind::Extrapolated | SlotKind::Interpolated);
+    if !generated && warp.is_none() {
+        // Its displayed region (a no-op without a widened window).
+        let frame = kept.iter().find(|f| f.meta.index == slot.source.id);
+        let shown = match frame {
+            Some(f) => Some(tokio::task::block_in_place(|| generator.displayed(f))?),
+            None => None,
         };
-        let t = Instant::now();
-        let g = tokio::task::block_in_place(|| {
-            generator.generate_with(alpha, CameraSource::Given(pose))
-        })?;
-        generation.push(t.elapsed().as_secs_f64() * 1e3);
-        passes.clear();
-        passes.extend(generator.timings().iter().map(|p| p.pass));
-        return Ok((Some(g.frame), Some(start.elapsed())));
+        return Ok((shown, Some(slot.source.ready_at)));
     }
-    match slot.kind {
-        SlotKind::Rendered | SlotKind::Repeated => {
-            // Its displayed region (a no-op without a widened window).
-            let frame = kept.iter().find(|f| f.meta.index == slot.source.id);
-            let shown = match frame {
-                Some(f) => Some(tokio::task::block_in_place(|| generator.displayed(f))?),
-                None => None,
-            };
-            Ok((shown, Some(slot.source.ready_at)))
-        }
-        SlotKind::Extrapolated | SlotKind::Interpolated => {
-            let t = Instant::now();
-            let g = tokio::task::block_in_place(|| generator.generate(slot.alpha))?;
-            generation.push(t.elapsed().as_secs_f64() * 1e3);
-            passes.clear();
-            passes.extend(generator.timings().iter().map(|p| p.pass));
-            Ok((Some(g.frame), Some(start.elapsed())))
-        }
-    }
+    // A rendered or held frame warped to the viewer is generated at α = 0.
+    let (alpha, camera) = match warp {
+        Some(pose) => (
+            if generated { slot.alpha } else { 0.0 },
+            CameraSource::Given(pose),
+        ),
+        None => (slot.alpha, CameraSource::Extrapolated),
+    };
+    let t = Instant::now();
+    let g = tokio::task::block_in_place(|| generator.generate_with(alpha, camera))?;
+    generation.push(t.elapsed().as_secs_f64() * 1e3);
+    passes.clear();
+    passes.extend(generator.timings().iter().map(|p| p.pass));
+    Ok((Some(g.frame), Some(start.elapsed())))
 }
 
 fn write_png(dir: &std::path::Path, id: u64, frame: &Frame) -> anyhow::Result<()> {
