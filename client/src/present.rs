@@ -168,9 +168,11 @@ pub struct Report {
     pub outages: StreamStats,
     /// Every displayed frame.
     pub records: Vec<Record>,
-    /// The passes of the last generated frame, its rendered frame's ingest
-    /// included, in the order they ran, where the backend times them (the
-    /// CPU reference always, wgpu when profiling; otherwise empty).
+    /// The passes of the last generated frame whose rendered frame followed
+    /// the one before it (no gap; the last generated frame if none did),
+    /// that rendered frame's ingest included, in the order they ran, where
+    /// the backend times them (the CPU reference always, wgpu when
+    /// profiling; otherwise empty).
     pub passes: Vec<String>,
     /// The stages the generator was planned to run, from the method and
     /// the stream's effects (in words in the JSON).
@@ -314,6 +316,7 @@ pub async fn run_headless(
         ingest_ms: Vec::new(),
         ingested: VecDeque::from([(first.meta.index, Duration::ZERO)]),
         restarts: u64::from(matches!(first_outcome, PushOutcome::Restarted { .. })),
+        followed: VecDeque::new(),
     };
     let start_pose = first.meta.camera.pose;
     if let Some(ViewerSource::Live(live)) = config.viewer.as_ref().map(|v| &v.source) {
@@ -326,8 +329,12 @@ pub async fn run_headless(
     let mut view_error_deg = Vec::new();
     let mut generation = Vec::new();
     let mut decode_ms = Vec::new();
-    // The passes of the last generated frame (ingest and generation).
+    // The passes of each generated frame (ingest and generation), and of
+    // the last one generated from a frame that followed its predecessor
+    // (after a gap the stages that compare with the frame before have
+    // nothing to do), or of the last one while there is none such.
     let mut passes = Vec::new();
+    let mut shown_passes = Vec::new();
     let (mut received, mut missed) = (1u64, 0u64);
     let mut k: u64 = 0;
     let last = (config.duration.as_secs_f64() / di.as_secs_f64()).floor() as u64;
@@ -406,6 +413,11 @@ pub async fn run_headless(
                 (&mut generation, &mut passes),
                 (start, warp.map(|n| n.pose)),
             )?;
+            let generated = warp.is_some()
+                || matches!(slot.kind, SlotKind::Extrapolated | SlotKind::Interpolated);
+            if generated && (pusher.followed.contains(&slot.source.id) || shown_passes.is_empty()) {
+                shown_passes.clone_from(&passes);
+            }
             let shown_input = match warp {
                 Some(n) => Some(InputShown {
                     seq: n.seq,
@@ -498,7 +510,7 @@ pub async fn run_headless(
         summary,
         outages: session.stats(),
         records: accounting.records().to_vec(),
-        passes: passes.iter().map(|p| p.name().to_string()).collect(),
+        passes: shown_passes.iter().map(|p| p.name().to_string()).collect(),
         plan,
         viewer: ViewerReport {
             mode: ViewerConfig::mode(config.viewer.as_ref()).into(),
@@ -575,6 +587,9 @@ struct Pusher {
     ingested: VecDeque<(u64, Duration)>,
     /// Pushes that restarted the history.
     restarts: u64,
+    /// The newest few frames pushed right after their predecessor (no
+    /// gap: every ingest stage had the frame before to work with).
+    followed: VecDeque<u64>,
 }
 
 impl Pusher {
@@ -595,6 +610,12 @@ impl Pusher {
             let t = Instant::now();
             let outcome = tokio::task::block_in_place(|| generator.push(f))?;
             self.ingest_ms.push(t.elapsed().as_secs_f64() * 1e3);
+            if self.last.is_some_and(|p| p + 1 == f.meta.index) {
+                self.followed.push_back(f.meta.index);
+                if self.followed.len() > 2 * KEPT {
+                    self.followed.pop_front();
+                }
+            }
             self.last = Some(f.meta.index);
             self.ingested
                 .push_back((f.meta.index, self.start.elapsed()));
