@@ -4,6 +4,8 @@
 //! * [`reconnect`]: a stream that reconnects when its server goes away;
 //! * [`impair`]: a lossy, jittery relay for tests and demos;
 //! * [`present`]: the presentation loop, headless or into [`window`];
+//! * [`latch`]: when late input takes the viewer's pose, and what
+//!   becomes of an image that missed its vsync;
 //! * [`eval`]: `client eval`, quality against milliseconds for every
 //!   method and setting;
 //! * [`viewer`]: the viewer's camera (issue 20): scripted input tracks;
@@ -15,6 +17,7 @@ pub mod connect;
 pub mod demo;
 pub mod eval;
 pub mod impair;
+pub mod latch;
 pub mod present;
 pub mod receiver;
 pub mod reconnect;

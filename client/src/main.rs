@@ -698,8 +698,20 @@ fn session(
         let v = &report.viewer;
         if args.interactive {
             println!(
-                "  viewer ({}): {} inputs sent ({} not); the last turned {:.1}° and moved {:.2} m from the first frame's camera",
-                v.mode, v.inputs.sent, v.inputs.unsent, v.turned_deg, v.moved_m
+                "  viewer ({}): {} inputs sent ({} not); the last turned {:.1}° and moved {:.2} m from the first frame's camera{}",
+                v.mode,
+                v.inputs.sent,
+                v.inputs.unsent,
+                v.turned_deg,
+                v.moved_m,
+                if args.late_input == "on" {
+                    format!(
+                        "; {} late images replaced by fresh ones",
+                        report.replaced_late
+                    )
+                } else {
+                    String::new()
+                }
             );
         }
         if let (Some(turn), Some(within)) = (v.vsync_turn_deg, v.within_vsync_turn()) {

@@ -17,6 +17,10 @@
 //! several arrived within one vsync all are pushed in stream order (each
 //! frame's motion points to the one before it) and only the newest is
 //! shown; the others are superseded.
+//!
+//! With late input the viewer's pose is taken as late as a slot allows and
+//! an image that missed its vsync is replaced when a fresh one fits before
+//! the next ([`crate::latch`]).
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -30,6 +34,7 @@ use protocol::wire::{Input, InputEcho};
 use protocol::{Frame, Pose};
 use serde::Serialize;
 
+use crate::latch::LateLatch;
 use crate::reconnect::{Stream, StreamStats};
 use crate::viewer::{InputTrack, LiveViewer, angle_deg};
 
@@ -152,6 +157,10 @@ pub struct Report {
     /// Vsyncs whose slot could not be prepared in time (the loop was
     /// behind), skipped.
     pub missed_vsyncs: u64,
+    /// Late input: images finished after their vsync and replaced by a
+    /// fresh one for the next (`crate::latch`); each vsync is also counted
+    /// in `missed_vsyncs`.
+    pub replaced_late: u64,
     /// Generation time per generated frame, ms.
     pub generation_ms: Percentiles,
     /// Push (upload + history + background) time per rendered frame, ms.
@@ -336,6 +345,9 @@ pub async fn run_headless(
     let mut passes = Vec::new();
     let mut shown_passes = Vec::new();
     let (mut received, mut missed) = (1u64, 0u64);
+    // Late input: when to take the pose, and late images replaced.
+    let mut latch = LateLatch::new(di);
+    let mut replaced = 0u64;
     let mut k: u64 = 0;
     let last = (config.duration.as_secs_f64() / di.as_secs_f64()).floor() as u64;
     loop {
@@ -362,7 +374,16 @@ pub async fn run_headless(
         }
         // The viewer's input, sent at once: taken as late as it can be,
         // after the ingest and just before this slot is generated, so
-        // that late input shows the newest pose there is.
+        // that late input shows the newest pose there is; with late input
+        // only as long before the slot's vsync as a slot takes (`latch`).
+        let planned = clock();
+        let planned = if late {
+            let at = latch.input_at(planned, vsync + di);
+            tokio::time::sleep_until((start + at).into()).await;
+            at
+        } else {
+            planned
+        };
         let newest = config.viewer.as_ref().map(|v| {
             let (now, at) = (Instant::now(), clock());
             let (pose, buttons) = v.source.input(&start_pose, at, now);
@@ -413,6 +434,18 @@ pub async fn run_headless(
                 (&mut generation, &mut passes),
                 (start, warp.map(|n| n.pose)),
             )?;
+            if let Some(n) = warp {
+                let finished = clock();
+                latch.observe(finished.saturating_sub(planned.min(n.at)));
+                if latch.replace(finished, vsync + di) {
+                    // Its pose would be more than a vsync old when shown;
+                    // the next slot takes a newer one in time.
+                    replaced += 1;
+                    missed += 1;
+                    k += 1;
+                    continue;
+                }
+            }
             let generated = warp.is_some()
                 || matches!(slot.kind, SlotKind::Extrapolated | SlotKind::Interpolated);
             if generated && (pusher.followed.contains(&slot.source.id) || shown_passes.is_empty()) {
@@ -452,7 +485,13 @@ pub async fn run_headless(
                     scheduler.drops(),
                 );
                 if let Some(v) = &config.viewer {
-                    let ip = accounting.summary(scheduler.drops()).input_to_photon_ms;
+                    let records = accounting.records();
+                    let ip = Percentiles::of(
+                        records[records.len().saturating_sub(120)..]
+                            .iter()
+                            .filter_map(|r| r.input_to_photon_ms)
+                            .collect(),
+                    );
                     stats += &format!(
                         "\n{}: input to photon p50 {:5.2} ms   p99 {:5.2} ms",
                         ViewerConfig::mode(Some(v)),
@@ -503,6 +542,7 @@ pub async fn run_headless(
         seconds: config.duration.as_secs_f64(),
         received,
         missed_vsyncs: missed,
+        replaced_late: replaced,
         generation_ms: Percentiles::of(generation),
         ingest_ms: Percentiles::of(pusher.ingest_ms),
         decode_ms: Percentiles::of(decode_ms),

@@ -227,13 +227,14 @@ async fn a_given_refresh_rate_and_a_dump_of_what_was_presented() {
     let dir = tempfile::tempdir().unwrap();
     let dump = dir.path().join("presented");
     let target = dump.clone();
-    let r = present_with(Method::Gffe, 2.0, false, move |c| {
+    // 4 s: on a loaded machine a 2 s run once showed no extrapolated frame.
+    let r = present_with(Method::Gffe, 4.0, false, move |c| {
         c.refresh_hz = Some(75.0);
         c.dump_dir = Some(target);
     })
     .await;
     assert!((r.display_fps - 75.0).abs() < 0.01);
-    let slots = (2000.0f64 / (1000.0 / 75.0)).floor() as i64 + 1;
+    let slots = (4000.0f64 / (1000.0 / 75.0)).floor() as i64 + 1;
     assert!((r.records.len() as i64 + r.missed_vsyncs as i64 - slots).abs() <= 1);
     // 75 / 30 = 2.5 slots per rendered frame: α steps of 0.4 (which of
     // them the loaded machine meets varies).
@@ -329,10 +330,10 @@ async fn the_generation_plan_runs_live() {
 /// Interactive streaming (issue 20) on loopback, through a relay that
 /// delays every datagram by 30 ms each way, with a scripted 90°/s turn at
 /// 96×54, 20 → 40: with late input every displayed frame shows exactly the
-/// viewer's pose taken after the ingest of its vsync (its angle to the
-/// viewer at present is the turn during its input to photon), so a slot
-/// finished before its vsync is within one vsync's turn of the viewer at
-/// present. On a quiet machine that is every slot (the README's runs); a
+/// viewer's pose taken for its slot (its angle to the viewer at present is
+/// the turn during its input to photon), latched as late as a slot allows
+/// (`client::latch`), so a slot finished before its vsync is within one
+/// vsync's turn of the viewer at present. On a quiet machine that is every slot (the README's runs); a
 /// loaded two-core machine finishes some slots late (98.9 % within in one
 /// CI run, 60 % on a machine running at half speed), so ≥ 90 % is
 /// asserted. Input to photon stays within a display interval plus the
@@ -389,13 +390,14 @@ async fn late_input_shows_the_newest_viewer_pose() {
     for r in [&late, &server] {
         let e = Percentiles::of(r.viewer.view_error_deg.clone());
         eprintln!(
-            "{}: view error p50 {:.2}° p99 {:.2}°, within {turn}° on {:.3}; input to photon {:?}; missed {}, generation {:?}",
+            "{}: view error p50 {:.2}° p99 {:.2}°, within {turn}° on {:.3}; input to photon {:?}; missed {} ({} late images replaced), generation {:?}",
             r.viewer.mode,
             e.p50,
             e.p99,
             r.viewer.within_vsync_turn().unwrap(),
             r.summary.input_to_photon_ms,
             r.missed_vsyncs,
+            r.replaced_late,
             r.generation_ms
         );
         assert!(
@@ -429,6 +431,17 @@ async fn late_input_shows_the_newest_viewer_pose() {
         "{ip_late:?} against {:?}",
         late.generation_ms
     );
+    // The pose is latched as late as a slot allows (`client::latch`), not
+    // at the slot's vsync: a displayed pose is well under a display
+    // interval old (here 22.8 ms of 25 when taken at the vsync, 4.8–14.7
+    // latched).
+    assert!(
+        ip_late.p50 <= 0.8 * di,
+        "{ip_late:?} against {:?}",
+        late.generation_ms
+    );
+    // A replaced late image is a missed vsync, never a displayed frame.
+    assert!(late.replaced_late <= late.missed_vsyncs);
     // Without late input: the server's camera, echoing the inputs it
     // rendered from, a render and a round trip behind.
     assert_eq!(server.viewer.mode, "server camera from input");
