@@ -42,15 +42,19 @@ pub struct Link {
     /// Render for each client from the camera its input sends (`serve
     /// --interactive`, issue 20) instead of one live stream.
     pub interactive: bool,
+    /// The adaptive rendering window of a scene (`serve --window`).
+    pub window: WindowMode,
 }
 
 impl Default for Link {
-    /// Cubic, and colour through H.264 at the automatic rate.
+    /// Cubic, colour through H.264 at the automatic rate, no adaptive
+    /// window.
     fn default() -> Self {
         Self {
             congestion: Congestion::default(),
             color: video::ColorCodec::DEFAULT_LIVE,
             interactive: false,
+            window: WindowMode::Off,
         }
     }
 }
@@ -64,7 +68,10 @@ pub fn start_local(
     fps: f64,
     link: Link,
 ) -> anyhow::Result<LocalServer> {
-    let window = WindowSettings::default();
+    let window = WindowSettings {
+        mode: link.window,
+        ..WindowSettings::default()
+    };
     start_local_from(
         scene_spec(scene, size, fps, window),
         (size, fps),

@@ -12,6 +12,7 @@ use framegen::Method;
 use framegen::accounting::Percentiles;
 use protocol::FrameSize;
 use protocol::dump::{DumpWriter, Manifest};
+use protocol::wire::WindowMode;
 
 #[derive(Parser)]
 #[command(
@@ -146,6 +147,13 @@ struct RunArgs {
     /// it; `off` shows the camera the server rendered.
     #[arg(long, default_value = "on", value_parser = ["on", "off"])]
     late_input: String,
+    /// The in-process server's adaptive rendering window (GFFE §4.3, as
+    /// `server serve --window`): off, keep-density or keep-size. Off by
+    /// default: the in-process renderer shares this machine's cores, and
+    /// the widened frames cost it more than the borders they save
+    /// (README, "Evaluate"); `serve` renders keep-density by default.
+    #[arg(long, default_value = "off", value_parser = clap::value_parser!(WindowMode))]
+    render_window: WindowMode,
 }
 
 impl Default for RunArgs {
@@ -586,6 +594,7 @@ fn session(
         congestion: args.congestion,
         color: args.color_codec,
         interactive: args.interactive,
+        window: args.render_window,
     };
     runtime.block_on(async move {
         let local = match args.server {

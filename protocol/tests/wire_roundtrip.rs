@@ -320,3 +320,22 @@ fn a_welcome_largest_frame_covers_its_size() -> Result<(), WireError> {
     assert!(matches!(e, ValidationError::OutOfRange(_)), "{e}");
     Ok(())
 }
+
+/// Window modes are named as on the command line and in reports, and parse
+/// back; anything else is a typed error.
+#[test]
+fn window_modes_parse_from_their_names() -> Result<(), UnknownWindowMode> {
+    for mode in WindowMode::ALL {
+        assert_eq!(mode.name().parse::<WindowMode>()?, mode);
+    }
+    assert_eq!(
+        "keep-density".parse::<WindowMode>()?,
+        WindowMode::KeepDensity
+    );
+    let err = "wide".parse::<WindowMode>().err().map(|e| e.to_string());
+    assert_eq!(
+        err.as_deref(),
+        Some("expected off, keep-density or keep-size, not \"wide\"")
+    );
+    Ok(())
+}

@@ -66,7 +66,7 @@ struct RecordArgs {
     png: bool,
     /// Adaptive rendering window (GFFE §4.3): off, keep-density (the
     /// rendered size grows) or keep-size (lower density).
-    #[arg(long, default_value = "off", value_parser = parse_window)]
+    #[arg(long, default_value = "off", value_parser = clap::value_parser!(WindowMode))]
     window: WindowMode,
 }
 
@@ -109,9 +109,12 @@ Then: client connect --pin FINGERPRINT --token TOKEN (both printed at start)")]
         /// Displayed size for scenes, WIDTHxHEIGHT.
         #[arg(long, default_value = "640x360", value_parser = clap::value_parser!(FrameSize))]
         size: FrameSize,
-        /// Adaptive rendering window for scenes.
-        #[arg(long, default_value = "off", value_parser = parse_window)]
-        window: WindowMode,
+        /// Adaptive rendering window (GFFE §4.3): off, keep-density or
+        /// keep-size. Default: keep-density for scenes (extrapolated frames
+        /// get content at their borders for a few % more pixels; README,
+        /// "Evaluate"), off for dumps (they play as recorded).
+        #[arg(long, value_parser = clap::value_parser!(WindowMode))]
+        window: Option<WindowMode>,
         /// Colour codec: `h264` (libx264 at 0.6 bits a pixel a frame, e.g.
         /// 4.1 Mbit/s for 640x360 at 30 fps), `h264@MBIT`, `h264-444[@MBIT]`;
         /// `raw` or lossless `zstd` f16 for research.
@@ -183,15 +186,6 @@ enum ImportFormat {
     Unreal,
 }
 
-fn parse_window(s: &str) -> Result<WindowMode, String> {
-    match s {
-        "off" => Ok(WindowMode::Off),
-        "keep-density" => Ok(WindowMode::KeepDensity),
-        "keep-size" => Ok(WindowMode::KeepSize),
-        _ => Err("expected off, keep-density or keep-size".into()),
-    }
-}
-
 /// An error ends the process with one line on stderr (the whole chain, no
 /// backtrace) and a non-zero status.
 fn main() -> Result<(), gpu_device::OneLine> {
@@ -228,6 +222,11 @@ fn command(cli: Cli) -> anyhow::Result<()> {
                 host::session::DEFAULT_MAX_INTERACTIVE_SESSIONS
             } else {
                 host::session::DEFAULT_MAX_SESSIONS
+            });
+            let window = window.unwrap_or(if dump.is_some() {
+                WindowMode::Off
+            } else {
+                WindowMode::KeepDensity
             });
             let (source, size, fps) = match dump {
                 Some(dir) => {

@@ -140,7 +140,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         if index == 0 && rendered {
             variants.extend(variant::resolutions(&config.resolutions));
         }
-        variant::with_codecs(&mut variants, &config.colors, size);
+        variant::with_codecs(&mut variants, &config.colors, size, rendered);
         if !config.only.is_empty() {
             variants.retain(|v| config.only.iter().any(|o| v.label.contains(o.as_str())));
         }
@@ -160,9 +160,15 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                 None => groups.push((key, vec![v])),
             }
         }
+        // The group of gffe's geometry-aware result first: GFFE eq. 3's
+        // focus region is defined from it, for the groups at its size
+        // that follow (each method renders with its default window).
+        groups.sort_by_key(|(_, vs)| !vs.iter().any(geometry_aware));
+        let mut focus: HashMap<usize, Vec<bool>> = HashMap::new();
         let name = input.name();
         let mut rows = Vec::new();
         let mut stream = Vec::new();
+        let mut captured: Vec<(usize, Vec<heatmap::Capture>)> = Vec::new();
         let group_count = groups.len();
         for (g, ((gsize, window), vs)) in groups.into_iter().enumerate() {
             if !sizes.contains(&gsize) {
@@ -185,39 +191,50 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                     group_count,
                     gsize.width,
                     gsize.height,
-                    variant::window_name(window)
+                    window.name()
                 ),
             );
-            let heat = (index < config.heatmap_inputs
-                && window == WindowMode::Off
-                && gsize == size)
+            let heat = (index < config.heatmap_inputs && gsize == size)
                 .then(|| heatmap_frames(seq.len() as usize, config.warmup, config.heatmap_frames));
             let save = config
                 .save_frames
                 .as_deref()
                 .map(|root| (root, name.as_str()));
+            let mut own = HashMap::new();
             let out = run_group(
                 &mut seq,
                 &vs,
                 ctx.as_ref(),
                 config,
                 (heat.as_deref(), save),
+                if gsize == size { &mut focus } else { &mut own },
                 &bar,
             )?;
             bar.finish_and_clear();
             rows.extend(out.rows);
-            if window == WindowMode::Off && gsize == size {
-                stream.extend(out.stream);
+            // The stream table: the plain stream at the main size where one
+            // was fed, else the first at that size.
+            if gsize == size && (stream.is_empty() || window == WindowMode::Off) {
+                stream = out.stream;
             }
+            // The methods' rows of one truth frame come from the groups
+            // of their windows: one heat map of them all.
             for (truth_index, captures) in out.heat {
-                let file = heatmap::write(
-                    &config.out,
-                    &name,
-                    config.start + truth_index as u64,
-                    &captures,
-                )?;
-                heatmaps.push(file);
+                match captured.iter_mut().find(|(t, _)| *t == truth_index) {
+                    Some((_, all)) => all.extend(captures),
+                    None => captured.push((truth_index, captures)),
+                }
             }
+        }
+        for (truth_index, mut captures) in captured {
+            captures.sort_by_key(|c| variants.iter().position(|v| v.label == c.label));
+            let file = heatmap::write(
+                &config.out,
+                &name,
+                config.start + truth_index as u64,
+                &captures,
+            )?;
+            heatmaps.push(file);
         }
         // Report order: the sweep's.
         rows.sort_by_key(|r: &Row| variants.iter().position(|v| v.label == r.label));
@@ -304,6 +321,7 @@ fn run_group(
     ctx: Option<&Arc<GpuContext>>,
     config: &EvalConfig,
     (heat_frames, save): (Option<&[usize]>, Option<(&std::path::Path, &str)>),
+    focus: &mut HashMap<usize, Vec<bool>>,
     bar: &ProgressBar,
 ) -> anyhow::Result<GroupOutput> {
     let mut runs = variants
@@ -470,8 +488,7 @@ fn run_group(
         }
         // GFFE eq. 3's focus region of each truth frame, from the
         // geometry-aware result (gffe without shading correction), for
-        // every variant alike.
-        let mut focus: HashMap<usize, Vec<bool>> = HashMap::new();
+        // every variant alike (kept in `focus` for the groups that follow).
         for (index, outputs, m, s, behind) in &pending {
             let v = runs[*index].variant;
             if !geometry_aware(v) {
@@ -523,7 +540,12 @@ fn run_group(
                     &test,
                     &truth_image,
                     &regions,
-                    focus.get(&truth_pos).map(Vec::as_slice),
+                    // Eq. 3's region is the extrapolators' (it is defined
+                    // on the frame after the rendered one).
+                    focus
+                        .get(&truth_pos)
+                        .filter(|_| behind == 0)
+                        .map(Vec::as_slice),
                 )?;
                 run.quality.add(&sc, g);
                 for other in outputs.iter().skip(1) {

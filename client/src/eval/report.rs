@@ -17,7 +17,7 @@ use serde::Serialize;
 use super::measure::{Quality, RegionQuality};
 use super::sequence::{RenderCost, RenderOrigin};
 use super::timing::{CopyFloor, Timing, TimingAcc};
-use super::variant::{Axis, CODEC_METHODS, EVERY_STAGE, Variant, window_name};
+use super::variant::{Axis, CODEC_METHODS, EVERY_STAGE, Variant};
 use super::{BackendKind, EvalConfig};
 
 /// Everything an `eval` run measured.
@@ -140,7 +140,7 @@ impl Row {
             shading: s.effective_shading(),
             plan: s.plan().to_string(),
             resample: s.resample.name(),
-            window: window_name(v.window),
+            window: v.window.name(),
             size: format!("{}x{}", v.size.width, v.size.height),
             color_codec: v.color.to_string(),
             stream_mbit: None,
@@ -205,7 +205,7 @@ pub fn bitrate(scene: &SceneReport) -> Vec<BitratePoint> {
     let rows: Vec<&Row> = scene
         .rows
         .iter()
-        .filter(|r| r.size == size && r.n == 1 && r.window == "off")
+        .filter(|r| r.size == size && r.n == 1)
         .filter(|r| match r.axis {
             Axis::Method => r.label == r.method,
             Axis::Codec => true,

@@ -31,6 +31,40 @@ pub enum WindowMode {
     KeepSize,
 }
 
+impl WindowMode {
+    /// Every mode.
+    pub const ALL: [WindowMode; 3] = [
+        WindowMode::Off,
+        WindowMode::KeepDensity,
+        WindowMode::KeepSize,
+    ];
+
+    /// The name on command lines and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            WindowMode::Off => "off",
+            WindowMode::KeepDensity => "keep-density",
+            WindowMode::KeepSize => "keep-size",
+        }
+    }
+}
+
+/// A window mode name other than `off`, `keep-density` or `keep-size`.
+#[derive(Debug, thiserror::Error)]
+#[error("expected off, keep-density or keep-size, not {0:?}")]
+pub struct UnknownWindowMode(String);
+
+impl std::str::FromStr for WindowMode {
+    type Err = UnknownWindowMode;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| UnknownWindowMode(s.to_string()))
+    }
+}
+
 /// First message of a session, client → server, on the control stream.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Hello {

@@ -17,7 +17,13 @@
 //!   blow up the rendered size;
 //! * the window is snapped outward to whole pixels of the display density,
 //!   so with [`WindowMode::KeepDensity`] the displayed region is an exact
-//!   pixel crop of the rendered image.
+//!   pixel crop of the rendered image;
+//! * each widened side is rounded up to a multiple of [`margin_step`]
+//!   (about 2.5 % of the side, even), so the rendered size changes only
+//!   when a margin crosses a
+//!   step: a video encoder restarts with a keyframe at every new size, and
+//!   a size that changed with every frame made every frame a keyframe (the
+//!   live demo at 320×180 missed twice the vsyncs).
 
 use glam::{DVec2, DVec3};
 use protocol::wire::WindowMode;
@@ -112,6 +118,14 @@ pub fn adaptive_window(settings: &WindowSettings, prev: &Pose, cur: &Camera) -> 
     }
 }
 
+/// The widened sides' margins are multiples of this many display pixels
+/// along a side of `pixels`: an even number near 2.5 % of it (8 of 320, 4
+/// of 180, 32 of 1280; 2 at least), so the size stays even for 4:2:0 video
+/// and few sizes occur.
+pub fn margin_step(pixels: u32) -> f64 {
+    2.0 * (f64::from(pixels) / 80.0).round().max(1.0)
+}
+
 /// Snaps `window` outward to whole display pixels and gives the rendered
 /// size: with [`WindowMode::KeepDensity`] the size grows with the window, with
 /// [`WindowMode::KeepSize`] it stays `display`.
@@ -121,9 +135,12 @@ pub fn snap(mode: WindowMode, window: Window, display: FrameSize) -> (Window, Fr
     }
     let px = 2.0 / f64::from(display.width);
     let py = 2.0 / f64::from(display.height);
-    let extra = |ndc: f64, step: f64| ((ndc - 1.0).max(0.0) / step - 1e-9).ceil().max(0.0);
-    let (l, r) = (extra(-window.u0, px), extra(window.u1, px));
-    let (b, t) = (extra(-window.v0, py), extra(window.v1, py));
+    let extra = |ndc: f64, step: f64, whole: f64| {
+        ((ndc - 1.0).max(0.0) / step / whole - 1e-9).ceil().max(0.0) * whole
+    };
+    let (sx, sy) = (margin_step(display.width), margin_step(display.height));
+    let (l, r) = (extra(-window.u0, px, sx), extra(window.u1, px, sx));
+    let (b, t) = (extra(-window.v0, py, sy), extra(window.v1, py, sy));
     let snapped = Window {
         u0: -1.0 - l * px,
         u1: 1.0 + r * px,
@@ -223,5 +240,12 @@ mod tests {
         assert!((x1 - x0 - 320.0).abs() < 1e-9 && (y1 - y0 - 180.0).abs() < 1e-9);
         let (_, kept) = snap(WindowMode::KeepSize, w, display);
         assert_eq!(kept, display);
+        // Margins in whole steps of 8 and 4 px: 0.1033 of 160 px is
+        // 16.5 px, so 24; 0.02 of 90 px is 1.8, so 4.
+        assert_eq!((margin_step(320), margin_step(180)), (8.0, 4.0));
+        assert_eq!(size, FrameSize::new(320 + 24, 180 + 4));
+        // A slightly different widening keeps the size.
+        let near = Window { u0: -1.12, ..w };
+        assert_eq!(snap(WindowMode::KeepDensity, near, display).1, size);
     }
 }
