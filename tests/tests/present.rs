@@ -210,8 +210,11 @@ async fn interpolation_adds_at_least_one_render_interval() {
     let latency = Percentiles::of(held.iter().map(|x| x.latency_ms).collect());
     assert!(added.p50 >= vsync - 0.5, "{added:?}");
     assert!(latency.p50 >= interval - 0.5, "{latency:?}");
+    // Where most rendered frames were held, so is the summary's median (a
+    // loaded machine shows more rendered frames directly, unheld: 33 of 77
+    // held in one CI run).
     assert!(
-        s.added_latency_ms.p50 >= vsync - 0.5,
+        s.added_latency_ms.p50 >= vsync - 0.5 || 2 * held.len() < s.rendered,
         "{:?}",
         s.added_latency_ms
     );
