@@ -437,15 +437,19 @@ async fn late_input_shows_the_newest_viewer_pose() {
         "{ip_late:?} against {:?}",
         late.generation_ms
     );
-    // The pose is latched as late as a slot allows (`client::latch`), not
-    // at the slot's vsync: a displayed pose is well under a display
-    // interval old (here 22.8 ms of 25 when taken at the vsync, 4.8–14.7
-    // latched).
-    assert!(
-        ip_late.p50 <= 0.8 * di,
-        "{ip_late:?} against {:?}",
-        late.generation_ms
-    );
+    // Where slots leave room (the latch's lead, twice the longest recent
+    // slot, within half an interval), the pose is latched as late as a
+    // slot allows (`client::latch`), not at the slot's vsync: a displayed
+    // pose is well under a display interval old (here 22.8 ms of 25 when
+    // taken at the vsync, 4.8–15.0 latched). A loaded machine leaves no
+    // room, and the pose is taken at once.
+    if late.generation_ms.p99 < di / 4.0 {
+        assert!(
+            ip_late.p50 <= 0.8 * di,
+            "{ip_late:?} against {:?}",
+            late.generation_ms
+        );
+    }
     // A replaced late image is a missed vsync, never a displayed frame.
     assert!(late.replaced_late <= late.missed_vsyncs);
     // Without late input: the server's camera, echoing the inputs it
