@@ -89,16 +89,22 @@ fn methods_on_a_scene_and_on_its_dump() {
     }
 
     let [scene, dumped] = [&report.scenes[0], &report.scenes[1]];
-    // The four methods, the oracle-motion reference beside gffe, gffe
-    // without shading correction and gffe with every stage.
-    assert_eq!(scene.rows.len(), 7);
+    // The four methods, the oracle-motion and given-camera references
+    // beside gffe, gffe without shading correction and gffe with every
+    // stage.
+    assert_eq!(scene.rows.len(), 8);
     assert_eq!(scene.rows[3].label, client::eval::variant::ORACLE);
-    assert_eq!(scene.rows[5].label, client::eval::variant::NO_SHADING);
-    assert_eq!(scene.rows[6].label, client::eval::variant::EVERY_STAGE);
+    assert_eq!(scene.rows[4].label, client::eval::variant::GIVEN_CAMERA);
+    assert_eq!(scene.rows[6].label, client::eval::variant::NO_SHADING);
+    assert_eq!(scene.rows[7].label, client::eval::variant::EVERY_STAGE);
+    // The given camera is a reference: timed, on no front.
+    let given = &scene.rows[4];
+    assert!(given.given_camera && given.ms(BackendKind::Cpu).is_some());
+    assert!(given.front_zero_latency.is_empty() && given.front_all.is_empty());
     // `crossing` moves objects that cast shadows: its plan is every stage,
     // shading correction included.
-    assert!(scene.rows[2].shading && !scene.rows[5].shading);
-    assert_eq!(scene.rows[2].plan, scene.rows[6].plan);
+    assert!(scene.rows[2].shading && !scene.rows[6].shading);
+    assert_eq!(scene.rows[2].plan, scene.rows[7].plan);
     assert!(
         scene.rows[2].plan.contains("shade"),
         "{}",

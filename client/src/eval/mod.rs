@@ -311,6 +311,7 @@ fn geometry_aware(v: &Variant) -> bool {
     let s = &v.settings;
     matches!(v.axis, Axis::Method | Axis::Shading)
         && !v.oracle
+        && !v.given_camera
         && s.method == framegen::Method::Gffe
         && !s.effective_shading()
 }
@@ -471,7 +472,15 @@ fn run_group(
                 let mut gen_time = Vec::new();
                 for j in 1..s {
                     let start = Instant::now();
-                    generated.push(g.generate(j as f64 / s as f64)?);
+                    let alpha = j as f64 / s as f64;
+                    generated.push(if run.variant.given_camera {
+                        // The skipped frame's camera (the plain view's pose:
+                        // a window changes the projection, not the pose).
+                        let pose = at(m + j).truth.meta.camera.pose;
+                        g.generate_with(alpha, framegen::CameraSource::Given(pose))?
+                    } else {
+                        g.generate(alpha)?
+                    });
                     gen_time.push(start.elapsed());
                 }
                 let passes = if g.profiling() {
@@ -554,6 +563,7 @@ fn run_group(
                     run.agreement = Some(run.agreement.map_or(p, |a: f64| a.min(p)));
                 }
                 if run.variant.axis == Axis::Method
+                    && !run.variant.given_camera
                     && s == 2
                     && heat_frames.is_some_and(|h| h.contains(&truth_pos))
                 {

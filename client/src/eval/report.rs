@@ -105,6 +105,10 @@ pub struct Row {
     pub stream_mbit: Option<f64>,
     /// Render intervals of added latency.
     pub added_latency_frames: u32,
+    /// Generated with the skipped frame's own camera (what late input
+    /// gives an interactive stream) instead of GFFE eq. 2's: on no front,
+    /// since a stream without input cannot have it.
+    pub given_camera: bool,
     /// Quality against ground truth.
     pub quality: Quality,
     /// Per backend.
@@ -145,6 +149,7 @@ impl Row {
             color_codec: v.color.to_string(),
             stream_mbit: None,
             added_latency_frames: v.added_latency_frames(),
+            given_camera: v.given_camera,
             quality,
             timing: timing.iter().map(TimingAcc::finish).collect(),
             render: None,
@@ -306,6 +311,7 @@ impl Report {
                                 let r = &scene.rows[i];
                                 r.size == size
                                     && r.n == n
+                                    && !r.given_camera
                                     && (!zero_latency || r.added_latency_frames == 0)
                                     && r.ms(b).is_some()
                             })
@@ -493,7 +499,11 @@ impl Report {
             md,
             "\n★ = on the Pareto front (ms on that backend against mean ꟻLIP, same scene, resolution and n) among \
              the methods that add no latency; ☆ = on the front only when interpolation (one render interval of \
-             added latency) is admitted.\n"
+             added latency) is admitted. Two rows stand beside gffe as references, on neither front: `gffe \
+             oracle-motion` (the skipped frame's true depth and motion applied to the fed frame: what G-buffers of \
+             the future frame would buy; untimed) and `gffe given-camera` (gffe with the skipped frame's own camera \
+             instead of GFFE eq. 2's extrapolation: what an interactive stream's late input gives, and what eq. 2's \
+             guess of the camera costs).\n"
         );
         let _ = writeln!(md, "## Bandwidth floor\n");
         let _ = writeln!(

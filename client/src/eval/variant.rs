@@ -63,6 +63,9 @@ impl Axis {
 /// The label of the oracle-motion row.
 pub const ORACLE: &str = "gffe oracle-motion";
 
+/// The label of gffe given the skipped frame's true camera.
+pub const GIVEN_CAMERA: &str = "gffe given-camera";
+
 /// The label of gffe without shading correction (the geometry-aware
 /// result GFFE eq. 3's focus region is defined from).
 pub const NO_SHADING: &str = "gffe no-shading";
@@ -98,6 +101,12 @@ pub struct Variant {
     /// the rendered frame with `settings`' filter and pyramid. Untimed
     /// (it is not realisable), so on no Pareto front.
     pub oracle: bool,
+    /// Generates with the skipped frame's own camera instead of GFFE eq. 2's
+    /// extrapolation (`CameraSource::Given`): what an interactive stream's
+    /// late input gives (the viewer's newest pose is the displayed camera,
+    /// issue 20), and what eq. 2's guess of the camera costs. It needs
+    /// input, so it is on no Pareto front.
+    pub given_camera: bool,
     /// Runs every stage: the stream's effects are not applied
     /// ([`for_stream`]).
     pub every_stage: bool,
@@ -114,6 +123,7 @@ impl Variant {
             window: WindowMode::Off,
             size,
             oracle: false,
+            given_camera: false,
             every_stage: false,
             color: ColorCodec::Raw,
         }
@@ -186,7 +196,13 @@ pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
         oracle: true,
         ..Variant::new(Axis::Method, ORACLE.into(), at(Method::Gffe), size)
     };
-    out.insert(gffe_at.map_or(out.len(), |i| i + 1), oracle);
+    // Then gffe with the true camera and its own estimated geometry.
+    let given = Variant {
+        given_camera: true,
+        ..Variant::new(Axis::Method, GIVEN_CAMERA.into(), at(Method::Gffe), size)
+    };
+    let after = gffe_at.map_or(out.len(), |i| i + 1);
+    out.splice(after..after, [oracle, given]);
     let plain = Settings {
         shading: false,
         ..at(Method::Gffe)
@@ -363,6 +379,7 @@ mod tests {
                 "reproject",
                 "gffe",
                 ORACLE,
+                GIVEN_CAMERA,
                 "interp",
                 NO_SHADING,
                 EVERY_STAGE
@@ -385,6 +402,7 @@ mod tests {
         }
         assert_eq!(methods.iter().filter(|v| v.every_stage).count(), 1);
         assert_eq!(methods.iter().filter(|v| v.oracle).count(), 1);
+        assert_eq!(methods.iter().filter(|v| v.given_camera).count(), 1);
         assert!(
             !sweep(Sweep::Full, size, false)
                 .iter()
