@@ -170,6 +170,7 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
         let mut stream = Vec::new();
         let mut captured: Vec<(usize, Vec<heatmap::Capture>)> = Vec::new();
         let group_count = groups.len();
+        let group_sizes: Vec<FrameSize> = groups.iter().map(|((s, _), _)| *s).collect();
         for (g, ((gsize, window), vs)) in groups.into_iter().enumerate() {
             if !sizes.contains(&gsize) {
                 sizes.push(gsize);
@@ -207,7 +208,13 @@ pub fn run(config: &EvalConfig) -> anyhow::Result<Report> {
                 ctx.as_ref(),
                 config,
                 (heat.as_deref(), save),
-                if gsize == size { &mut focus } else { &mut own },
+                if gsize == size {
+                    // Kept whole only for the groups at this size that
+                    // follow (a frame-sized mask per truth frame).
+                    (&mut focus, group_sizes[g + 1..].contains(&size))
+                } else {
+                    (&mut own, false)
+                },
                 &bar,
             )?;
             bar.finish_and_clear();
@@ -322,7 +329,7 @@ fn run_group(
     ctx: Option<&Arc<GpuContext>>,
     config: &EvalConfig,
     (heat_frames, save): (Option<&[usize]>, Option<(&std::path::Path, &str)>),
-    focus: &mut HashMap<usize, Vec<bool>>,
+    (focus, keep_focus): (&mut HashMap<usize, Vec<bool>>, bool),
     bar: &ProgressBar,
 ) -> anyhow::Result<GroupOutput> {
     let mut runs = variants
@@ -576,6 +583,10 @@ fn run_group(
                     });
                 }
             }
+        }
+        if !keep_focus {
+            // No step of this group scores a position older than the ring.
+            focus.retain(|&pos, _| pos + 2 * max_step > r);
         }
         bar.inc(1);
         r += 1;
