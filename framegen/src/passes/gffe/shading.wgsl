@@ -33,7 +33,7 @@ const COHERENCE: f32 = 0.5;
 @group(0) @binding(9) var<storage, read_write> sh_out: array<vec4<f32>>;
 @group(0) @binding(10) var<storage, read> sh_prev_depth: array<f32>;
 
-const FOOTPRINT: f32 = 1.0 / 16.0;
+const FOOTPRINT: f32 = 0.25;
 const SAME_SURFACE_RATIO: f32 = 1.1;
 
 // `resample.rs`'s `same_surface`: depths within SAME_SURFACE_RATIO of the
