@@ -90,13 +90,27 @@ fn methods_on_a_scene_and_on_its_dump() {
 
     let [scene, dumped] = [&report.scenes[0], &report.scenes[1]];
     // The four methods, the oracle-motion and given-camera references
-    // beside gffe, gffe without shading correction and gffe with every
-    // stage.
-    assert_eq!(scene.rows.len(), 8);
+    // beside gffe, gffe without shading correction and its shading-oracle
+    // bound (scenes only), gffe with every stage.
+    assert_eq!(scene.rows.len(), 9);
+    assert_eq!(dumped.rows.len(), 8);
     assert_eq!(scene.rows[3].label, client::eval::variant::ORACLE);
     assert_eq!(scene.rows[4].label, client::eval::variant::GIVEN_CAMERA);
     assert_eq!(scene.rows[6].label, client::eval::variant::NO_SHADING);
-    assert_eq!(scene.rows[7].label, client::eval::variant::EVERY_STAGE);
+    assert_eq!(scene.rows[7].label, client::eval::variant::SHADING_ORACLE);
+    assert_eq!(scene.rows[8].label, client::eval::variant::EVERY_STAGE);
+    // The exact shading change removes error from gffe without shading
+    // correction where shadows move (`crossing`'s movers cast them); a
+    // reference, on no front.
+    let (plain, bound) = (&scene.rows[6], &scene.rows[7]);
+    assert!(bound.shading_oracle && !bound.shading && bound.plan == plain.plan);
+    assert!(
+        bound.quality.flip < plain.quality.flip,
+        "{} against {}",
+        bound.quality.flip,
+        plain.quality.flip
+    );
+    assert!(bound.front_zero_latency.is_empty() && bound.front_all.is_empty());
     // The given camera is a reference: timed, on no front.
     let given = &scene.rows[4];
     assert!(given.given_camera && given.ms(BackendKind::Cpu).is_some());
@@ -104,7 +118,7 @@ fn methods_on_a_scene_and_on_its_dump() {
     // `crossing` moves objects that cast shadows: its plan is every stage,
     // shading correction included.
     assert!(scene.rows[2].shading && !scene.rows[6].shading);
-    assert_eq!(scene.rows[2].plan, scene.rows[7].plan);
+    assert_eq!(scene.rows[2].plan, scene.rows[8].plan);
     assert!(
         scene.rows[2].plan.contains("shade"),
         "{}",
@@ -118,7 +132,10 @@ fn methods_on_a_scene_and_on_its_dump() {
         assert!((0.0..=1.0).contains(&q.ssim) && (0.0..=1.0).contains(&q.flip));
         let shares: f64 = q.regions.iter().map(|r| r.share).sum();
         assert!((shares - 1.0).abs() < 1e-9);
-        let d = dumped.rows.iter().find(|r| r.label == row.label).unwrap();
+        let Some(d) = dumped.rows.iter().find(|r| r.label == row.label) else {
+            assert!(row.shading_oracle, "{} is missing from the dump", row.label);
+            continue;
+        };
         // The same frames from a dump score the same where motion vectors
         // are not used (repeat, reproject, the oracle's true geometry) and
         // the window is the same (a dump plays as recorded, plain; the

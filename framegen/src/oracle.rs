@@ -14,9 +14,17 @@
 //! [`same_surface`] allows: the point was hidden), the pixel is a hole and
 //! is filled by the same push-pull as gffe's remaining holes. Depth and
 //! motion are the true ones.
+//!
+//! **The shading oracle** ([`shade`], issue 17) bounds shading correction
+//! (GFFE §4.4) instead: a frame generated without it keeps the shading of
+//! the frame it was made from; [`shade`] gives it the exact change of
+//! shading since, measured by the renderer as the truth over the truth
+//! rendered with the earlier lights and shadow casters. What error is left
+//! is the warp's, which no shading correction is meant to remove.
 
 use glam::Vec2;
-use protocol::Frame;
+use half::f16;
+use protocol::{Frame, FrameSize};
 
 use crate::FramegenError;
 use crate::generator::{Generated, finish};
@@ -38,15 +46,8 @@ pub fn backward_warp(
     let limits = protocol::Limits::default();
     rendered.validate(&limits)?;
     truth.validate(&limits)?;
-    let (size, other) = (rendered.meta.size, truth.meta.size);
-    if other != size {
-        return Err(FramegenError::Sizes(
-            size.width,
-            size.height,
-            other.width,
-            other.height,
-        ));
-    }
+    let size = rendered.meta.size;
+    same_size(size, truth.meta.size)?;
     let (src, dst) = (prepare(rendered), prepare(truth));
     let (w, h) = (size.width, size.height);
     let source = Source {
@@ -79,11 +80,67 @@ pub fn backward_warp(
     Ok(finish(meta, alpha, out))
 }
 
+/// Below this value of a channel without the change (`unshaded`) the
+/// change is taken as a difference, not a ratio (a ratio over black, or
+/// over the `f16` rounding near it, is meaningless).
+pub const SHADE_FLOOR: f32 = 1.0 / 1024.0;
+
+/// Gives `generated` (made without shading correction from a frame
+/// rendered at some earlier time) the exact change of shading since: each
+/// channel times `truth / unshaded`, where `unshaded` is the displayed
+/// frame `truth` rendered with the earlier time's lights and shadows
+/// (`scene::render::Renderer::render_shaded_at`). Light multiplies what a
+/// surface reflects, so the ratio carries the change onto the generated
+/// pixel's own texture even where the warp took it from a neighbour;
+/// where `unshaded` is black (below [`SHADE_FLOOR`]) the difference is
+/// added instead. Colour stays finite, non-negative and within `f16`;
+/// a channel with a non-finite input keeps its generated value.
+pub fn shade(generated: &mut Frame, truth: &Frame, unshaded: &Frame) -> Result<(), FramegenError> {
+    let limits = protocol::Limits::default();
+    for frame in [&*generated, truth, unshaded] {
+        frame.validate(&limits)?;
+        same_size(generated.meta.size, frame.meta.size)?;
+    }
+    for ((g, t), u) in generated
+        .color
+        .iter_mut()
+        .zip(&truth.color)
+        .zip(&unshaded.color)
+    {
+        for c in 0..3 {
+            let (gv, tv, uv) = (g[c].to_f32(), t[c].to_f32(), u[c].to_f32());
+            let v = if uv >= SHADE_FLOOR {
+                gv * (tv / uv)
+            } else {
+                gv + (tv - uv)
+            };
+            if v.is_finite() {
+                g[c] = f16::from_f32(v.clamp(0.0, f16::MAX.to_f32()));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `Ok` when `other` is `size`.
+fn same_size(size: FrameSize, other: FrameSize) -> Result<(), FramegenError> {
+    if other == size {
+        Ok(())
+    } else {
+        Err(FramegenError::Sizes(
+            size.width,
+            size.height,
+            other.width,
+            other.height,
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use half::f16;
-    use protocol::{FrameMeta, FrameSize};
+    use protocol::FrameMeta;
 
     /// A 16×8 frame whose red channel is `1 + x + 16y` and depth 5.
     fn frame(index: u64) -> Frame {
@@ -133,6 +190,61 @@ mod tests {
         };
         assert!(matches!(
             backward_warp(&rendered, &small, 0.5, (Resample::Nearest, 8)),
+            Err(FramegenError::Sizes(16, 8, 8, 16))
+        ));
+    }
+
+    #[test]
+    fn the_shading_oracle_applies_the_exact_change_and_stays_finite() {
+        let truth = frame(1);
+        // Unshaded: the truth at half the light.
+        let mut unshaded = truth.clone();
+        for c in &mut unshaded.color {
+            c[0] = f16::from_f32(c[0].to_f32() * 0.5);
+        }
+        // Generated from the earlier shading: exactly the unshaded image
+        // comes back as the truth.
+        let mut g = unshaded.clone();
+        shade(&mut g, &truth, &unshaded).unwrap();
+        assert_eq!(g.color, truth.color);
+        // No change: the generated frame is kept as it is.
+        let mut g = frame(0);
+        g.color[3][1] = f16::from_f32(0.25);
+        let kept = g.color.clone();
+        shade(&mut g, &truth, &truth).unwrap();
+        assert_eq!(g.color, kept);
+        // Black without the change: the difference is added; extremes and
+        // non-finite inputs stay finite and within f16.
+        let mut dark = truth.clone();
+        dark.color[0] = [f16::ZERO, f16::from_f32(1e-6), f16::NAN, f16::ONE];
+        dark.color[1] = [f16::from_f32(1e-3), f16::INFINITY, f16::ONE, f16::ONE];
+        let mut bright = truth.clone();
+        bright.color[0][0] = f16::from_f32(2.0);
+        bright.color[1][0] = f16::MAX;
+        let mut g = frame(0);
+        g.color[1][0] = f16::MAX;
+        let before = g.color[0];
+        shade(&mut g, &bright, &dark).unwrap();
+        assert_eq!(g.color[0][0].to_f32(), before[0].to_f32() + 2.0);
+        assert_eq!(
+            g.color[0][2], before[2],
+            "a NaN input keeps the generated value"
+        );
+        assert_eq!(g.color[1][0], f16::MAX, "clamped within f16");
+        assert!(
+            g.color
+                .iter()
+                .all(|c| c.iter().all(|v| v.is_finite() && v.to_f32() >= 0.0))
+        );
+        let small = Frame {
+            meta: FrameMeta {
+                size: FrameSize::new(8, 16),
+                ..truth.meta
+            },
+            ..truth.clone()
+        };
+        assert!(matches!(
+            shade(&mut frame(0), &small, &truth),
             Err(FramegenError::Sizes(16, 8, 8, 16))
         ));
     }

@@ -498,3 +498,38 @@ fn opengl_renders_what_vulkan_renders() {
         );
     }
 }
+
+#[test]
+fn a_frame_with_earlier_shading_keeps_its_geometry_and_takes_the_earlier_light() {
+    let fps = 30.0;
+    let time = |k: u64| k as f64 / fps;
+    let times = |k: u64| [time(k), time(k - 1), time(k - 2)];
+    // A light circling static blocks under a static camera: the frame at
+    // 12 with frame 6's shading is frame 6.
+    let mut r = renderer("moving_light");
+    let now = r.render(12, fps).unwrap();
+    let earlier = r.render(6, fps).unwrap();
+    let shaded = r.render_shaded_at(12, times(12), time(6)).unwrap();
+    assert_ne!(now.color, earlier.color, "the light moved");
+    assert_eq!(shaded.color, earlier.color);
+    assert_eq!(shaded.depth, now.depth);
+    assert_eq!(shaded.meta.time, now.meta.time);
+    // Its own time's shading is the plain render.
+    let same = r.render_shaded_at(12, times(12), time(12)).unwrap();
+    assert_eq!(same.color, now.color);
+    // A spinning shadow caster under a moving camera: the caster is drawn
+    // where it is now (depth, motion), its shadow where it was.
+    let mut r = renderer("spinning_shadow");
+    let now = r.render(12, fps).unwrap();
+    let shaded = r.render_shaded_at(12, times(12), time(9)).unwrap();
+    assert_eq!(shaded.depth, now.depth);
+    assert_eq!(shaded.motion, now.motion);
+    assert_eq!(shaded.meta.camera, now.meta.camera);
+    let differ = (now.color.iter().zip(&shaded.color))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        differ > 100 && differ < SIZE.pixels() as usize / 4,
+        "{differ} pixels changed: the shadow, not the frame"
+    );
+}

@@ -319,6 +319,7 @@ fn geometry_aware(v: &Variant) -> bool {
     matches!(v.axis, Axis::Method | Axis::Shading)
         && !v.oracle
         && !v.given_camera
+        && !v.shading_oracle
         && s.method == framegen::Method::Gffe
         && !s.effective_shading()
 }
@@ -462,6 +463,19 @@ fn run_group(
                     .collect::<Result<Vec<_>, _>>()?;
                 outputs.push(generated);
             }
+            // The shading oracle's displayed frames with the fed frame's
+            // shading, once for every backend.
+            let unshaded = if run.variant.shading_oracle && scored {
+                (1..s)
+                    .map(|j| {
+                        let index = at(m + j).truth.meta.index;
+                        seq.render_shaded(index, fed.meta.time)?
+                            .context("the shading oracle needs a rendered scene")
+                    })
+                    .collect::<anyhow::Result<Vec<_>>>()?
+            } else {
+                Vec::new()
+            };
             for ((b, g), t) in run.generators.iter_mut().zip(&mut run.timing) {
                 // wgpu alternates: plain intervals give the true totals (one
                 // submission per push and per generation), profiled ones in
@@ -489,6 +503,11 @@ fn run_group(
                         g.generate(alpha)?
                     });
                     gen_time.push(start.elapsed());
+                }
+                // Not part of the generator: applied after its timing.
+                for (j, unshaded) in unshaded.iter().enumerate() {
+                    let truth = &at(m + j + 1).truth;
+                    framegen::oracle::shade(&mut generated[j].frame, truth, unshaded)?;
                 }
                 let passes = if g.profiling() {
                     g.timings()

@@ -109,6 +109,10 @@ pub struct Row {
     /// gives an interactive stream) instead of GFFE eq. 2's: on no front,
     /// since a stream without input cannot have it.
     pub given_camera: bool,
+    /// gffe without shading correction given the exact shading change
+    /// (the shading oracle, `framegen::oracle::shade`): the bound of shading
+    /// correction, on no front.
+    pub shading_oracle: bool,
     /// Quality against ground truth.
     pub quality: Quality,
     /// Per backend.
@@ -150,6 +154,7 @@ impl Row {
             stream_mbit: None,
             added_latency_frames: v.added_latency_frames(),
             given_camera: v.given_camera,
+            shading_oracle: v.shading_oracle,
             quality,
             timing: timing.iter().map(TimingAcc::finish).collect(),
             render: None,
@@ -312,6 +317,7 @@ impl Report {
                                 r.size == size
                                     && r.n == n
                                     && !r.given_camera
+                                    && !r.shading_oracle
                                     && (!zero_latency || r.added_latency_frames == 0)
                                     && r.ms(b).is_some()
                             })
@@ -503,7 +509,9 @@ impl Report {
              oracle-motion` (the skipped frame's true depth and motion applied to the fed frame: what G-buffers of \
              the future frame would buy; untimed) and `gffe given-camera` (gffe with the skipped frame's own camera \
              instead of GFFE eq. 2's extrapolation: what an interactive stream's late input gives, and what eq. 2's \
-             guess of the camera costs).\n"
+             guess of the camera costs). `gffe oracle-shading` (scenes only) bounds shading correction (GFFE §4.4): \
+             gffe without it, its frames given the exact change of shading since the fed frame (the truth over the \
+             truth rendered with the fed frame's lights and shadows); it is on no front either.\n"
         );
         let _ = writeln!(md, "## Bandwidth floor\n");
         let _ = writeln!(

@@ -203,6 +203,28 @@ impl Sequence {
         Ok(Some(frame))
     }
 
+    /// Displayed frame `index` (plain, as its truth) with the lights and
+    /// shadows of time `shading_t`: what a perfect shading correction
+    /// changes a frame generated from one rendered at `shading_t` by is the
+    /// change from this to the truth. `None` for a dump. Not counted in the
+    /// render cost.
+    pub fn render_shaded(&mut self, index: u64, shading_t: f64) -> anyhow::Result<Option<Frame>> {
+        let Source::Rendered { plain, .. } = &mut self.source else {
+            return Ok(None);
+        };
+        let time = |k: u64| k as f64 / self.fps;
+        let frame = plain.render_shaded_at(
+            index,
+            [
+                time(index),
+                time(index.saturating_sub(1)),
+                time(index.saturating_sub(2)),
+            ],
+            shading_t,
+        )?;
+        Ok(Some(frame))
+    }
+
     /// The next step, `None` at the end.
     pub fn next_step(&mut self) -> anyhow::Result<Option<Step>> {
         if self.next >= self.end {

@@ -70,6 +70,10 @@ pub const GIVEN_CAMERA: &str = "gffe given-camera";
 /// result GFFE eq. 3's focus region is defined from).
 pub const NO_SHADING: &str = "gffe no-shading";
 
+/// The label of gffe without shading correction given the exact shading
+/// change (the shading-oracle reference, [`framegen::oracle::shade`]).
+pub const SHADING_ORACLE: &str = "gffe oracle-shading";
+
 /// The label of gffe running every stage, whatever the stream's effects.
 pub const EVERY_STAGE: &str = "gffe every-stage";
 
@@ -107,6 +111,13 @@ pub struct Variant {
     /// issue 20), and what eq. 2's guess of the camera costs. It needs
     /// input, so it is on no Pareto front.
     pub given_camera: bool,
+    /// gffe without shading correction, its output given the exact change
+    /// of shading from the fed frame to the displayed one (the truth over
+    /// the truth rendered with the fed frame's lights and shadows,
+    /// [`framegen::oracle::shade`]): what a perfect shading correction
+    /// (GFFE §4.4) would reach, the rest being the warp's error. Needs the
+    /// renderer (scenes only); on no Pareto front.
+    pub shading_oracle: bool,
     /// Runs every stage: the stream's effects are not applied
     /// ([`for_stream`]).
     pub every_stage: bool,
@@ -124,6 +135,7 @@ impl Variant {
             size,
             oracle: false,
             given_camera: false,
+            shading_oracle: false,
             every_stage: false,
             color: ColorCodec::Raw,
         }
@@ -181,7 +193,8 @@ pub fn for_stream(variants: &mut [Variant], effects: framegen::Effects) {
 }
 
 /// The variants of one scene at `size`; `windows` is false for dumps (their
-/// window is whatever they were rendered with).
+/// window is whatever they were rendered with, and no renderer gives the
+/// shading oracle its frames).
 pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
     let at = |m| Settings::for_method(m);
     let mut out: Vec<Variant> = Method::ALL
@@ -208,6 +221,13 @@ pub fn sweep(kind: Sweep, size: FrameSize, windows: bool) -> Vec<Variant> {
         ..at(Method::Gffe)
     };
     out.push(Variant::new(Axis::Shading, NO_SHADING.into(), plain, size));
+    // Its bound: the exact shading change, where a renderer can give it.
+    if windows {
+        out.push(Variant {
+            shading_oracle: true,
+            ..Variant::new(Axis::Shading, SHADING_ORACLE.into(), plain, size)
+        });
+    }
     out.push(Variant {
         every_stage: true,
         ..Variant::new(Axis::Plan, EVERY_STAGE.into(), at(Method::Gffe), size)
@@ -382,13 +402,14 @@ mod tests {
                 GIVEN_CAMERA,
                 "interp",
                 NO_SHADING,
+                SHADING_ORACLE,
                 EVERY_STAGE
             ]
         );
         assert!(
             methods
                 .iter()
-                .all(|v| v.settings.shading == (v.label != NO_SHADING))
+                .all(|v| v.settings.shading == (v.label != NO_SHADING && !v.shading_oracle))
         );
         // The stream's effects reach all but the every-stage row.
         for_stream(&mut methods, framegen::Effects::STATIC);
@@ -403,10 +424,12 @@ mod tests {
         assert_eq!(methods.iter().filter(|v| v.every_stage).count(), 1);
         assert_eq!(methods.iter().filter(|v| v.oracle).count(), 1);
         assert_eq!(methods.iter().filter(|v| v.given_camera).count(), 1);
+        assert_eq!(methods.iter().filter(|v| v.shading_oracle).count(), 1);
+        // A dump has neither window rows nor a renderer for the oracle.
         assert!(
             !sweep(Sweep::Full, size, false)
                 .iter()
-                .any(|v| v.axis == Axis::Window)
+                .any(|v| v.axis == Axis::Window || v.shading_oracle)
         );
     }
 

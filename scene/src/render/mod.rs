@@ -371,7 +371,26 @@ impl Renderer {
         prev_prev_t: f64,
     ) -> Result<Frame, RenderError> {
         let scope = self.gpu.scope("rendering a frame");
-        let frame = self.render_in_scope(index, [t, prev_t, prev_prev_t], None);
+        let frame = self.render_in_scope(index, [t, prev_t, prev_prev_t], None, None);
+        scope.finish()?;
+        frame
+    }
+
+    /// [`Renderer::render_at`] with the lights and the shadow map of time
+    /// `shading_t` (the shadow casters where they were then): the frame at
+    /// `t` as it would look had its shading stopped at `shading_t`. What a
+    /// perfect shading correction (GFFE §4.4) would have to add to a frame
+    /// generated from the one rendered at `shading_t` is the change from
+    /// this image to the plain render; `eval`'s shading-oracle row applies
+    /// exactly that change.
+    pub fn render_shaded_at(
+        &mut self,
+        index: u64,
+        [t, prev_t, prev_prev_t]: [f64; 3],
+        shading_t: f64,
+    ) -> Result<Frame, RenderError> {
+        let scope = self.gpu.scope("rendering a frame");
+        let frame = self.render_in_scope(index, [t, prev_t, prev_prev_t], None, Some(shading_t));
         scope.finish()?;
         frame
     }
@@ -390,7 +409,7 @@ impl Renderer {
         poses: &ViewerPoses,
     ) -> Result<Frame, RenderError> {
         let scope = self.gpu.scope("rendering a frame");
-        let frame = self.render_in_scope(index, [t, prev_t, prev_t], Some(poses));
+        let frame = self.render_in_scope(index, [t, prev_t, prev_t], Some(poses), None);
         scope.finish()?;
         frame
     }
@@ -400,9 +419,14 @@ impl Renderer {
         index: u64,
         [t, prev_t, prev_prev_t]: [f64; 3],
         given: Option<&ViewerPoses>,
+        shading_t: Option<f64>,
     ) -> Result<Frame, RenderError> {
         let started = Instant::now();
         let state = self.scene.evaluate(t);
+        // Lights and shadow casters: at `t`, or where they were at the
+        // shading time asked for.
+        let shading = shading_t.map(|s| self.scene.evaluate(s));
+        let lit = shading.as_ref().unwrap_or(&state);
         let mut prev = self.scene.evaluate(prev_t);
         let cut = given.is_none() && prev.shot != state.shot;
         if cut {
@@ -446,7 +470,7 @@ impl Renderer {
         let shadow_from_world = self
             .shadow
             .as_ref()
-            .and_then(|_| self.shadow_projection(&state));
+            .and_then(|_| self.shadow_projection(lit));
         let frame_u = uniforms::frame_uniforms(
             &self.scene,
             &FrameInputs {
@@ -454,27 +478,30 @@ impl Renderer {
                 prev_camera: &prev_camera,
                 size: (size.width, size.height),
                 prev_size: (prev_size.width, prev_size.height),
-                lights: &state.lights,
+                lights: &lit.lights,
                 shadow_from_world,
             },
         );
         let queue = &self.gpu.queue;
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame_u));
-        let mut objects = Vec::with_capacity(self.instances.len());
-        for (i, inst) in self.instances.iter().enumerate() {
-            let material = &self.scene.materials[&self.scene.objects[inst.object].material];
-            objects.push(uniforms::object_uniforms(
-                &camera,
-                i,
-                state.models[i],
-                prev.models[i],
-                material,
-            ));
-        }
-        if !objects.is_empty() {
-            queue.write_buffer(&self.object_buffer, 0, bytemuck::cast_slice(&objects));
-        }
-
+        let objects = |models: &[DMat4]| -> Vec<uniforms::ObjectGpu> {
+            self.instances
+                .iter()
+                .enumerate()
+                .map(|(i, inst)| {
+                    let material = &self.scene.materials[&self.scene.objects[inst.object].material];
+                    uniforms::object_uniforms(&camera, i, models[i], prev.models[i], material)
+                })
+                .collect()
+        };
+        let write_objects = |objects: &[uniforms::ObjectGpu]| {
+            if !objects.is_empty() {
+                queue.write_buffer(&self.object_buffer, 0, bytemuck::cast_slice(objects));
+            }
+        };
+        // The shadow casters where the shading time has them; written (and
+        // the shadow pass submitted) before this frame's own.
+        write_objects(&objects(&lit.models));
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
         if let (Some((pipeline, map)), true) = (&self.shadow, shadow_from_world.is_some()) {
             let view = map.create_view(&Default::default());
@@ -496,6 +523,11 @@ impl Renderer {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &self.frame_bind, &[]);
             self.draw(&mut pass, |m| m.alpha >= 1.0);
+        }
+        if shading.is_some() {
+            self.gpu.queue.submit([encoder.finish()]);
+            encoder = self.gpu.device.create_command_encoder(&Default::default());
+            write_objects(&objects(&state.models));
         }
         {
             let views = [
