@@ -14,8 +14,13 @@
 //! `gffe-nearest/total` is gffe with the seed's nearest-pixel colour
 //! instead of the default resampling filter (what the filter costs).
 //!
+//! `shading` and `shade` are shading correction's estimate (per fed frame)
+//! and its application (per generated frame); a scene whose shading moves
+//! (`FRAMEGEN_BENCH_SCENE=sun_sweep`) gives them real work.
+//!
 //! `cargo bench -p tests --bench framegen [-- FILTER]`, e.g. `-- wgpu/1280x720`;
-//! `FRAMEGEN_BENCH_SIZES=960x540,1280x720,1920x1080` by default.
+//! `FRAMEGEN_BENCH_SIZES=960x540,1280x720,1920x1080` and
+//! `FRAMEGEN_BENCH_SCENE=default` by default.
 
 use std::time::Duration;
 
@@ -69,6 +74,11 @@ fn run(g: &mut FrameGenerator, feed: &mut Feed) {
     g.generate(0.5).expect("generate");
 }
 
+/// The built-in scene rendered for the benches.
+fn scene_name() -> String {
+    std::env::var("FRAMEGEN_BENCH_SCENE").unwrap_or_else(|_| "default".into())
+}
+
 fn bench(c: &mut Criterion) {
     for size in sizes() {
         bench_size(c, size);
@@ -76,7 +86,8 @@ fn bench(c: &mut Criterion) {
 }
 
 fn bench_size(c: &mut Criterion, size: FrameSize) {
-    let rendered = tests::render_scene("default", size, 60.0, 60..76);
+    let name = scene_name();
+    let rendered = tests::render_scene(&name, size, 60.0, 60..76);
     let frames = framegen::decimate::decimate(&rendered, 2);
     let ctx = GpuContext::new().expect("GPU");
     let label = format!("{}x{}", size.width, size.height);
@@ -122,6 +133,8 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
                     Pass::Warp,
                     Pass::BgFill,
                     Pass::Holes,
+                    Pass::Shading,
+                    Pass::Shade,
                     Pass::Readback,
                 ],
             ),
@@ -193,11 +206,11 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
                 })
             });
         }
-        // The render of the same frames (the default scene at this size,
+        // The render of the same frames (the same scene at this size,
         // submit + readback, as `server record` reports it): what a
         // generated frame must cost a fraction of. In both groups, so that
         // each group holds its own yardstick from the same run.
-        let scene = scene::Scene::load("builtin:default").expect("scene");
+        let scene = scene::Scene::load(&format!("builtin:{name}")).expect("scene");
         let mut renderer =
             scene::render::Renderer::new(scene, size, std::path::Path::new(".")).expect("renderer");
         let mut index = 60;

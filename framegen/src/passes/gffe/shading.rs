@@ -257,7 +257,9 @@ pub fn ratio_into(
 /// below finds what the kernel finds, bit for bit.
 #[inline]
 fn quanta(v: f32) -> i32 {
-    (v / QUANTUM).round() as i32
+    // By the cast `floor`, not `round` (a call on this target): the same
+    // for whole multiples.
+    floor(v / QUANTUM + 0.5)
 }
 
 /// Farthest a displacement reaches: the even search, then the pixel
@@ -321,16 +323,20 @@ pub fn flow_block(b: usize, ratio: &[[f32; 2]], size: (u32, u32)) -> [f32; 4] {
         }
     }
     // Σ|r_t(x) − r_{t−1}(x − d)| in quanta, or `None` once past `limit`.
+    // A whole block's rows are slices of a constant length, which the
+    // compiler sums in vector registers; a block at the frame's edge sums
+    // only its own columns.
+    let sad = |a: &[i32], b: &[i32]| a.iter().zip(b).map(|(a, b)| (a - b).abs()).sum::<i32>();
+    let whole = cols == BLOCK as usize;
     let cost = |dx: i32, dy: i32, limit: i32| {
         let mut cost = 0i32;
         for (y, row) in now.iter().enumerate().take(rows) {
-            let from = &before[(y as i32 + REACH - dy) as usize];
-            let from = &from[(REACH - dx) as usize..][..cols];
-            cost += row[..cols]
-                .iter()
-                .zip(from)
-                .map(|(a, b)| (a - b).abs())
-                .sum::<i32>();
+            let from = &before[(y as i32 + REACH - dy) as usize][(REACH - dx) as usize..];
+            cost += if whole {
+                sad(&row[..], &from[..BLOCK as usize])
+            } else {
+                sad(&row[..cols], &from[..cols])
+            };
             if cost > limit {
                 return None;
             }
