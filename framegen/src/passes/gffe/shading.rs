@@ -107,6 +107,11 @@ pub const FOCUS_HIGH: f32 = 0.05;
 /// trajectories are trusted).
 pub const MAX_STEPS: f32 = 4.0;
 
+/// Luminance ratio within which a pixel matches its aligned pixel in
+/// frame `t−1` (`1 + QUANTUM/4 < e^{QUANTUM/4}`: the log ratio, and with
+/// it `r`'s, is under half a [`QUANTUM`] and rounds to 0).
+const STILL: f32 = 1.0 + QUANTUM / 4.0;
+
 /// Log ratios are kept in steps of this (0.4 % of luminance): the flow's
 /// sums of them are then exact in `f32`, the same on every executor
 /// whatever order or `ln` it has.
@@ -184,6 +189,21 @@ pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_
         return [0.0; 2];
     }
     let (cx, cy) = (p.x as i32, p.y as i32);
+    let near = cy as usize * w as usize + cx as usize;
+    let aligned = prev.ratio.get(near).map_or(0.0, |r| r[0]);
+    let luma_at = |s: usize| match prev.luma.get(s) {
+        Some(&l) => l,
+        None => luminance(prev.color[s]) + LUMA_FLOOR,
+    };
+    // The pixel the position falls in is always in the footprint (its
+    // bilinear weight is at least ¼): when it is on the surface and within
+    // [`STILL`] of `lt`, so is the range's nearest end, and `r` rounds to
+    // 0 whatever the other taps hold. Most pixels of most frames, at a
+    // quarter of the work.
+    let l = luma_at(near);
+    if same_surface(prev.depth[near], d) && lt <= l * STILL && l <= lt * STILL {
+        return [0.0, aligned];
+    }
     // The bilinear footprint of the aligned position: what a sub-pixel
     // shift of the surface's texture could show there.
     let (bx, by) = (floor(p.x - 0.5), floor(p.y - 0.5));
@@ -201,10 +221,7 @@ pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_
         // Only taps of the pixel's own surface (not across a silhouette);
         // selects rather than branches (luminances are never NaN).
         let keep = (weight >= FOOTPRINT) & same_surface(prev.depth[s], d);
-        let l = match prev.luma.get(s) {
-            Some(&l) => l,
-            None => luminance(prev.color[s]) + LUMA_FLOOR,
-        };
+        let l = luma_at(s);
         lo = if keep && l < lo { l } else { lo };
         hi = if keep && l > hi { l } else { hi };
     }
@@ -218,10 +235,6 @@ pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_
     } else {
         0.0
     };
-    let aligned = prev
-        .ratio
-        .get(cy as usize * w as usize + cx as usize)
-        .map_or(0.0, |r| r[0]);
     [quantize(best.clamp(-MAX_LOG_RATIO, MAX_LOG_RATIO)), aligned]
 }
 
