@@ -126,20 +126,20 @@ impl Codec {
         match self {
             Codec::Raw => (raw, raw),
             Codec::Zstd => (1, zstd_compress_bound(raw)),
-            // Four bytes of code a pixel.
+            // One code a pixel.
             Codec::QuantDepth => {
-                let codes = raw / u64::from(format.bytes_per_pixel().max(1)) * 4;
+                let codes = raw / u64::from(format.bytes_per_pixel().max(1));
                 (
                     depth::HEADER as u64 + 1,
-                    depth::HEADER as u64 + zstd_compress_bound(codes),
+                    depth::HEADER as u64 + planar::max_packed_len(codes),
                 )
             }
-            // Two four-byte residuals a pixel.
+            // Two codes a pixel.
             Codec::MotionResidual => {
-                let codes = raw / u64::from(format.bytes_per_pixel().max(1)) * 8;
+                let codes = raw / u64::from(format.bytes_per_pixel().max(1)) * 2;
                 (
                     motion::HEADER as u64 + 1,
-                    motion::HEADER as u64 + zstd_compress_bound(codes),
+                    motion::HEADER as u64 + planar::max_packed_len(codes),
                 )
             }
             // A video access unit is far smaller than the f16 frame: even

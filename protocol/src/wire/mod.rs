@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::{BufferKind, Limits, ValidationError};
 
 /// The wire format version this crate speaks.
-pub const WIRE_VERSION: u16 = 5;
+pub const WIRE_VERSION: u16 = 6;
 
 /// Size of the fixed message header.
 pub const HEADER_LEN: usize = 8;
