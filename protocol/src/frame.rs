@@ -384,22 +384,25 @@ impl Frame {
         if !kind.allowed_formats().contains(&format) {
             return Err(ValidationError::FormatNotAllowed { kind, format });
         }
+        let n = self.meta.size.pixels() as usize;
         Ok(match (kind, format) {
-            (BufferKind::Color, PixelFormat::Rgba16Float) => f16_bytes(self.color.iter().flatten()),
-            (BufferKind::Color, _) => f16_bytes(self.color.iter().flat_map(|p| &p[..3])),
-            (BufferKind::Depth, _) => self.depth.iter().flat_map(|v| v.to_le_bytes()).collect(),
-            (BufferKind::Motion, PixelFormat::Rg16Float) => self
-                .motion
-                .iter()
-                .flatten()
-                .flat_map(|v| f16::from_f32(*v).to_le_bytes())
-                .collect(),
-            (BufferKind::Motion, _) => self
-                .motion
-                .iter()
-                .flatten()
-                .flat_map(|v| v.to_le_bytes())
-                .collect(),
+            (BufferKind::Color, PixelFormat::Rgba16Float) => {
+                le_bytes(self.color.iter().flatten(), 4 * n, |v| v.to_le_bytes())
+            }
+            (BufferKind::Color, _) => {
+                le_bytes(self.color.iter().flat_map(|p| &p[..3]), 3 * n, |v| {
+                    v.to_le_bytes()
+                })
+            }
+            (BufferKind::Depth, _) => le_bytes(self.depth.iter(), n, |v| v.to_le_bytes()),
+            (BufferKind::Motion, PixelFormat::Rg16Float) => {
+                le_bytes(self.motion.iter().flatten(), 2 * n, |v| {
+                    f16::from_f32(*v).to_le_bytes()
+                })
+            }
+            (BufferKind::Motion, _) => {
+                le_bytes(self.motion.iter().flatten(), 2 * n, |v| v.to_le_bytes())
+            }
             (kind, format) => {
                 let extra = self
                     .extras
@@ -482,8 +485,19 @@ impl Frame {
     }
 }
 
-fn f16_bytes<'a>(values: impl Iterator<Item = &'a f16>) -> Vec<u8> {
-    values.flat_map(|v| v.to_le_bytes()).collect()
+/// The little-endian bytes of `count` values (the capacity: a frame's
+/// buffer is megabytes, which a byte-at-a-time `collect` grows and fills
+/// slowly).
+fn le_bytes<T, const N: usize>(
+    values: impl Iterator<Item = T>,
+    count: usize,
+    bytes: impl Fn(T) -> [u8; N],
+) -> Vec<u8> {
+    let mut out = Vec::with_capacity(count * N);
+    for v in values {
+        out.extend_from_slice(&bytes(v));
+    }
+    out
 }
 
 fn f16_at(bytes: &[u8], i: usize) -> f16 {

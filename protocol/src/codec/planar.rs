@@ -29,16 +29,14 @@
 use super::CodecError;
 
 /// The median edge detector's prediction of a value from its left (`a`),
-/// upper (`b`) and upper-left (`c`) neighbours.
+/// upper (`b`) and upper-left (`c`) neighbours: the median of `a`, `b` and
+/// `a + b − c`, i.e. `a + b − c` clamped to `[min(a, b), max(a, b)]` (if
+/// `c ≥ max(a, b)` the sum is at most `min(a, b)`, if `c ≤ min(a, b)` at
+/// least `max(a, b)`). Without branches, which the residuals' signs would
+/// defeat; the sum is taken in `i64`, so it never wraps.
 fn med(a: i32, b: i32, c: i32) -> i32 {
-    if c >= a.max(b) {
-        a.min(b)
-    } else if c <= a.min(b) {
-        a.max(b)
-    } else {
-        // c lies strictly between a and b, so a + b − c does too: no overflow.
-        a.wrapping_add(b).wrapping_sub(c)
-    }
+    let sum = i64::from(a) + i64::from(b) - i64::from(c);
+    sum.clamp(i64::from(a.min(b)), i64::from(a.max(b))) as i32
 }
 
 /// Walks `values` in order, rows `width` wide, calling `f(i, prediction,
@@ -263,6 +261,22 @@ mod tests {
             Err(CodecError::BadParameters("significance map"))
         ));
         Ok(())
+    }
+
+    proptest! {
+        /// The clamp is LOCO-I's three cases.
+        #[test]
+        fn med_is_the_median_edge_detector(a in any::<i32>(), b in any::<i32>(), c in any::<i32>()) {
+            let expected = if c >= a.max(b) {
+                a.min(b)
+            } else if c <= a.min(b) {
+                a.max(b)
+            } else {
+                // c lies strictly between a and b: the result does too.
+                a.wrapping_add(b).wrapping_sub(c)
+            };
+            prop_assert_eq!(med(a, b, c), expected);
+        }
     }
 
     #[test]
