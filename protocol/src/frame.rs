@@ -384,25 +384,27 @@ impl Frame {
         if !kind.allowed_formats().contains(&format) {
             return Err(ValidationError::FormatNotAllowed { kind, format });
         }
-        let n = self.meta.size.pixels() as usize;
+        // Sized by the buffers themselves, not by the (maybe unvalidated)
+        // frame size.
+        let (colors, depths, motions) = (self.color.len(), self.depth.len(), self.motion.len());
         Ok(match (kind, format) {
             (BufferKind::Color, PixelFormat::Rgba16Float) => {
-                le_bytes(self.color.iter().flatten(), 4 * n, |v| v.to_le_bytes())
+                le_bytes(self.color.iter().flatten(), 4 * colors, |v| v.to_le_bytes())
             }
             (BufferKind::Color, _) => {
-                le_bytes(self.color.iter().flat_map(|p| &p[..3]), 3 * n, |v| {
+                le_bytes(self.color.iter().flat_map(|p| &p[..3]), 3 * colors, |v| {
                     v.to_le_bytes()
                 })
             }
-            (BufferKind::Depth, _) => le_bytes(self.depth.iter(), n, |v| v.to_le_bytes()),
+            (BufferKind::Depth, _) => le_bytes(self.depth.iter(), depths, |v| v.to_le_bytes()),
             (BufferKind::Motion, PixelFormat::Rg16Float) => {
-                le_bytes(self.motion.iter().flatten(), 2 * n, |v| {
+                le_bytes(self.motion.iter().flatten(), 2 * motions, |v| {
                     f16::from_f32(*v).to_le_bytes()
                 })
             }
-            (BufferKind::Motion, _) => {
-                le_bytes(self.motion.iter().flatten(), 2 * n, |v| v.to_le_bytes())
-            }
+            (BufferKind::Motion, _) => le_bytes(self.motion.iter().flatten(), 2 * motions, |v| {
+                v.to_le_bytes()
+            }),
             (kind, format) => {
                 let extra = self
                     .extras
