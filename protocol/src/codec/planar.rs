@@ -141,11 +141,7 @@ pub(crate) fn max_packed_len(count: u64) -> u64 {
 pub(crate) fn pack(values: &[i32], width: usize, level: i32) -> Result<Vec<u8>, CodecError> {
     let width = width.max(1);
     check_rows(values.len(), width)?;
-    let mut scratch = values.to_vec();
-    let mut residuals = vec![0u32; values.len()];
-    predict_rows(&mut scratch, width, |i, pred, value| {
-        residuals[i] = zigzag(value.wrapping_sub(pred));
-    });
+    let residuals = residuals(values, width);
     // The order is chosen on the maps alone (a thirty-second of the
     // residuals' bytes): the residuals follow the same pattern.
     let columns = transpose(&residuals, width);
@@ -157,6 +153,22 @@ pub(crate) fn pack(values: &[i32], width: usize, level: i32) -> Result<Vec<u8>, 
         (Order::Rows, by_rows, &residuals)
     };
     let planes = super::zstd_compress(&nonzero_planes(listed), level)?;
+    payload(order, &map, &planes)
+}
+
+/// The zigzagged residuals of `values` (whole rows `width` wide) against
+/// the median edge detector, in row order.
+fn residuals(values: &[i32], width: usize) -> Vec<u32> {
+    let mut scratch = values.to_vec();
+    let mut residuals = vec![0u32; values.len()];
+    predict_rows(&mut scratch, width, |i, pred, value| {
+        residuals[i] = zigzag(value.wrapping_sub(pred));
+    });
+    residuals
+}
+
+/// The payload of the compressed `map` and `planes` listed in `order`.
+fn payload(order: Order, map: &[u8], planes: &[u8]) -> Result<Vec<u8>, CodecError> {
     let map_bytes = u32::try_from(map.len()).map_err(|_| CodecError::WrongLength {
         got: map.len() as u64,
         expected: u64::from(u32::MAX),
@@ -164,8 +176,8 @@ pub(crate) fn pack(values: &[i32], width: usize, level: i32) -> Result<Vec<u8>, 
     let mut out = Vec::with_capacity(5 + map.len() + planes.len());
     out.push(order as u8);
     out.extend_from_slice(&map_bytes.to_le_bytes());
-    out.extend_from_slice(&map);
-    out.extend_from_slice(&planes);
+    out.extend_from_slice(map);
+    out.extend_from_slice(planes);
     Ok(out)
 }
 
@@ -313,14 +325,13 @@ mod tests {
         // The layout before the map: byte planes of every residual.
         let n = plane.len();
         let mut all = vec![0u8; n * 4];
-        let mut nonzero = 0;
-        predict_rows(&mut plane.clone(), w, |i, pred, value| {
-            let z = zigzag(value.wrapping_sub(pred));
-            nonzero += usize::from(z != 0);
+        let residuals = residuals(&plane, w);
+        for (i, z) in residuals.iter().enumerate() {
             for (b, byte) in z.to_le_bytes().into_iter().enumerate() {
                 all[b * n + i] = byte;
             }
-        });
+        }
+        let nonzero = residuals.iter().filter(|&&z| z != 0).count();
         assert!(nonzero > n / 20 && nonzero < n / 2, "{nonzero} of {n}");
         let before = super::super::zstd_compress(&all, 1)?.len();
         assert!(
@@ -333,20 +344,13 @@ mod tests {
 
     /// The payload of `plane`'s residuals listed in `order`.
     fn packed_in(plane: &[i32], width: usize, order: Order) -> Result<Vec<u8>, CodecError> {
-        let mut residuals = vec![0u32; plane.len()];
-        predict_rows(&mut plane.to_vec(), width, |i, pred, value| {
-            residuals[i] = zigzag(value.wrapping_sub(pred));
-        });
+        let mut residuals = residuals(plane, width);
         if order == Order::Columns {
             residuals = transpose(&residuals, width);
         }
         let map = super::super::zstd_compress(&significance(&residuals), 1)?;
         let planes = super::super::zstd_compress(&nonzero_planes(&residuals), 1)?;
-        let mut out = vec![order as u8];
-        out.extend_from_slice(&(map.len() as u32).to_le_bytes());
-        out.extend_from_slice(&map);
-        out.extend_from_slice(&planes);
-        Ok(out)
+        payload(order, &map, &planes)
     }
 
     /// Either order decodes to the plane, and the encoder keeps the one
@@ -408,10 +412,7 @@ mod tests {
         }
         let map = super::super::zstd_compress(&map, 1)?;
         let planes = super::super::zstd_compress(&[0; 4], 1)?;
-        let mut stray = vec![Order::Rows as u8];
-        stray.extend_from_slice(&(map.len() as u32).to_le_bytes());
-        stray.extend_from_slice(&map);
-        stray.extend_from_slice(&planes);
+        let stray = payload(Order::Rows, &map, &planes)?;
         assert!(matches!(
             unpack(&stray, n, w),
             Err(CodecError::BadParameters("significance map"))
@@ -449,8 +450,9 @@ mod tests {
         fn any_plane_round_trips(values in proptest::collection::vec(any::<i32>(), 0..300), width in 1usize..40) {
             let rows = values.len() / width;
             let values = &values[..rows * width];
-            let packed = pack(values, width, 1).unwrap();
-            prop_assert_eq!(unpack(&packed, values.len(), width).unwrap(), values);
+            let fail = |e: CodecError| TestCaseError::fail(e.to_string());
+            let packed = pack(values, width, 1).map_err(fail)?;
+            prop_assert_eq!(unpack(&packed, values.len(), width).map_err(fail)?, values);
         }
     }
 }
