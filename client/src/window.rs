@@ -592,20 +592,7 @@ fn bind(
     texture: &wgpu::Texture,
 ) -> wgpu::BindGroup {
     let view = texture.create_view(&Default::default());
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("image"),
-        layout,
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::TextureView(&view),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: wgpu::BindingResource::Sampler(sampler),
-            },
-        ],
-    })
+    gpu_device::view_and_sampler(device, "image", layout, &view, sampler)
 }
 
 fn begin<'a>(

@@ -285,6 +285,32 @@ impl std::fmt::Debug for OneLine {
     }
 }
 
+/// A bind group of a texture view (binding 0) and its sampler (binding 1),
+/// the layout of a sampled image: the renderer's shadow map, the window's
+/// frame.
+pub fn view_and_sampler(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    view: &wgpu::TextureView,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::TextureView(view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
+    })
+}
+
 /// Checks that `format` supports `usages` and `flags` on `adapter`, before
 /// any pipeline or texture is built with it.
 pub fn require_format(

@@ -3,7 +3,8 @@
 //! timestamps are unreliable, so this is wall time, as the DESIGN asks.
 //!
 //! `cargo bench -p scene --bench render` (set `RENDER_BENCH_SIZE=WxH` to
-//! change the size).
+//! change the size, `RENDER_BENCH_SHADOW_MAP=TEXELS` to pin the shadow
+//! map's side instead of the frame size's).
 
 use std::path::Path;
 
@@ -19,6 +20,12 @@ fn size() -> FrameSize {
         .unwrap_or(FrameSize::new(1280, 720))
 }
 
+fn shadow_map() -> Option<u32> {
+    std::env::var("RENDER_BENCH_SHADOW_MAP")
+        .ok()
+        .and_then(|s| s.parse().ok())
+}
+
 fn render(c: &mut Criterion) {
     let size = size();
     let mut group = c.benchmark_group(format!("render_{}x{}", size.width, size.height));
@@ -26,6 +33,9 @@ fn render(c: &mut Criterion) {
     for name in builtin::names() {
         let scene = Scene::load(&format!("builtin:{name}")).expect("built-in scene");
         let mut r = Renderer::new(scene, size, Path::new(".")).expect("renderer");
+        if let Some(side) = shadow_map() {
+            r.set_shadow_map(side);
+        }
         let mut k = 30;
         group.bench_function(name, |b| {
             b.iter(|| {

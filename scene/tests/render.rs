@@ -17,6 +17,15 @@ fn renderer(name: &str) -> Renderer {
     Renderer::new(scene, SIZE, Path::new(".")).unwrap()
 }
 
+/// Pixels whose red differs by more than `by` between two frames.
+fn red_changed(a: &Frame, b: &Frame, by: f32) -> usize {
+    a.color
+        .iter()
+        .zip(&b.color)
+        .filter(|(p, q)| (p[0].to_f32() - q[0].to_f32()).abs() > by)
+        .count()
+}
+
 fn pixel(i: usize) -> DVec2 {
     let w = SIZE.width as usize;
     DVec2::new((i % w) as f64 + 0.5, (i / w) as f64 + 0.5)
@@ -439,16 +448,44 @@ fn a_moving_light_moves_shadows_on_static_geometry() {
             .all(|m| m[0].abs() < 1e-4 && m[1].abs() < 1e-4)
     );
     // But the shading does, over a large part of the image.
-    let changed = a
-        .color
-        .iter()
-        .zip(&b.color)
-        .filter(|(p, q)| (p[0].to_f32() - q[0].to_f32()).abs() > 0.05)
-        .count();
+    let changed = red_changed(&a, &b, 0.05);
     assert!(
         changed > (SIZE.pixels() / 10) as usize,
         "only {changed} pixels changed"
     );
+}
+
+/// The shadow map follows the frame (2048² at 1280×720, at least 1024²),
+/// a caller may pin it, and another map changes only the shadows: colour
+/// where they fall, never depth or motion.
+#[test]
+fn the_shadow_map_follows_the_frame_and_can_be_pinned() {
+    assert_eq!(renderer("sky").shadow_map(), None);
+    let mut r = renderer("spinning_shadow");
+    assert_eq!(
+        r.shadow_map(),
+        Some(scene::render::shadow_map_side(SIZE)),
+        "the frame's own density"
+    );
+    assert_eq!(r.shadow_map(), Some(1024));
+    let coarse = r.render(12, 30.0).unwrap();
+    r.set_shadow_map(2048);
+    assert_eq!(r.shadow_map(), Some(2048));
+    let sharp = r.render(12, 30.0).unwrap();
+    assert_eq!(coarse.depth, sharp.depth);
+    assert_eq!(coarse.motion, sharp.motion);
+    let changed = red_changed(&coarse, &sharp, 0.02);
+    // The shadow's penumbra, a small part of the frame.
+    assert!(
+        changed > 20 && changed < (SIZE.pixels() / 10) as usize,
+        "{changed} pixels changed"
+    );
+    // Pinned to nothing: clamped to one texel, and still renders.
+    r.set_shadow_map(0);
+    assert_eq!(r.shadow_map(), Some(1));
+    let none = r.render(12, 30.0).unwrap();
+    assert_eq!(none.depth, sharp.depth);
+    assert!(none.color.iter().flatten().all(|c| c.to_f32().is_finite()));
 }
 
 /// The renderer on wgpu's OpenGL backend (what a machine without Mesa's

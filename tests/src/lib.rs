@@ -147,6 +147,16 @@ pub fn render_with(
     if let Some(w) = window {
         renderer.set_window(w);
     }
+    render_scene_by(&mut renderer, fps, indices)
+}
+
+/// Frames `indices` of the scene `renderer` draws, at `fps`.
+pub fn render_scene_by(
+    renderer: &mut scene::render::Renderer,
+    fps: f64,
+    indices: impl IntoIterator<Item = u64>,
+) -> Vec<Frame> {
+    let name = renderer.scene().name.clone();
     indices
         .into_iter()
         .map(|i| {

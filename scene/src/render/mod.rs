@@ -38,8 +38,39 @@ use protocol::{BufferKind, Camera, Frame, FrameMeta, FrameSize, Pose, Projection
 use targets::{SHADOW_FORMAT, Targets};
 use uniforms::{FrameInputs, OBJECT_STRIDE};
 
-/// Side of the square shadow map, texels.
-pub const SHADOW_MAP_SIZE: u32 = 2048;
+/// Shadow-map texels a side per pixel of the frame's longer side: 2048 at
+/// 1280×720, the size this scale was set at.
+pub const SHADOW_TEXELS_PER_PIXEL: f64 = 1.6;
+
+/// The square shadow map's side is a multiple of this and within
+/// `SHADOW_MAP_MIN..=SHADOW_MAP_MAX` texels.
+const SHADOW_MAP_STEP: u32 = 64;
+/// Smallest shadow-map side, texels. The receiver's biases grow with the
+/// texel (`surface.wgsl`), and below this they reach several centimetres
+/// on the built-in scenes' 60–80 m grounds: contacts leak light, and
+/// surfaces that shadow themselves at grazing angles (the inside of
+/// `pan`'s centre block, where its camera stands) flip between lit and
+/// shadowed.
+pub const SHADOW_MAP_MIN: u32 = 1024;
+/// Largest shadow-map side, texels.
+pub const SHADOW_MAP_MAX: u32 = 2048;
+
+/// Side of the square shadow map for frames of `size`, texels: a fixed
+/// density against the frame's pixels ([`SHADOW_TEXELS_PER_PIXEL`] a
+/// pixel of the longer side, rounded up to a multiple of 64, within
+/// `SHADOW_MAP_MIN..=SHADOW_MAP_MAX`), so a shadow's edge spans about as
+/// many pixels at every size, and a small frame does not pay for a large
+/// frame's map: the shadow pass's clear and raster of a 2048² map are a
+/// large part of a small frame's render on a software rasteriser, and the
+/// live demo renders beside the client on one machine.
+pub fn shadow_map_side(size: FrameSize) -> u32 {
+    let longer = f64::from(size.width.max(size.height));
+    let want = (longer * SHADOW_TEXELS_PER_PIXEL / f64::from(SHADOW_MAP_STEP)).ceil();
+    // Saturating float-to-int cast; the clamp bounds it either way.
+    (want as u32)
+        .saturating_mul(SHADOW_MAP_STEP)
+        .clamp(SHADOW_MAP_MIN, SHADOW_MAP_MAX)
+}
 
 /// A pass of the render graph.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -120,6 +151,7 @@ pub struct Renderer {
     shadow: Option<(wgpu::RenderPipeline, wgpu::Texture)>,
     translucent: Option<wgpu::RenderPipeline>,
     shadow_bind: wgpu::BindGroup,
+    shadow_layout: wgpu::BindGroupLayout,
     frame_buffer: wgpu::Buffer,
     frame_bind: wgpu::BindGroup,
     object_buffer: wgpu::Buffer,
@@ -168,68 +200,15 @@ impl Renderer {
             .collect::<Result<Vec<_>, SceneError>>()?;
         let instances = scene.instances();
 
-        let shadow = passes.contains(&Pass::Shadow).then(|| {
-            let map = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("shadow map"),
-                size: wgpu::Extent3d {
-                    width: SHADOW_MAP_SIZE,
-                    height: SHADOW_MAP_SIZE,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: SHADOW_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            });
-            (passes::shadow(device, &layouts), map)
-        });
-        // Without a shadow pass the shader never samples the map, but the
-        // layout still needs a texture: a 1×1 one.
-        let dummy;
-        let shadow_view = match &shadow {
-            Some((_, map)) => map.create_view(&Default::default()),
-            None => {
-                dummy = device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("no shadow map"),
-                    size: wgpu::Extent3d {
-                        width: 1,
-                        height: 1,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: SHADOW_FORMAT,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                });
-                dummy.create_view(&Default::default())
-            }
-        };
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("shadow"),
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            compare: Some(wgpu::CompareFunction::LessEqual),
-            ..Default::default()
-        });
-        let shadow_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("shadow map"),
-            layout: &layouts.shadow,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&shadow_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Sampler(&sampler),
-                },
-            ],
-        });
+        let shadow_pipeline = passes
+            .contains(&Pass::Shadow)
+            .then(|| passes::shadow(device, &layouts));
+        let (shadow_map, shadow_bind) = shadow_resources(
+            device,
+            &layouts.shadow,
+            shadow_pipeline.as_ref().map(|_| shadow_map_side(size)),
+        );
+        let shadow = shadow_pipeline.zip(shadow_map);
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame uniforms"),
             size: std::mem::size_of::<uniforms::FrameGpu>() as u64,
@@ -280,6 +259,7 @@ impl Renderer {
             shadow,
             translucent,
             shadow_bind,
+            shadow_layout: layouts.shadow,
             frame_buffer,
             frame_bind,
             object_buffer,
@@ -288,6 +268,28 @@ impl Renderer {
             last_ids: Vec::new(),
             window: WindowSettings::default(),
         })
+    }
+
+    /// The shadow map's side in texels; `None` for a scene without the
+    /// shadow pass.
+    pub fn shadow_map(&self) -> Option<u32> {
+        self.shadow.as_ref().map(|(_, map)| map.width())
+    }
+
+    /// Draws the shadow map at `side` texels a side (clamped to 1 and the
+    /// device's largest texture) instead of [`shadow_map_side`]'s for the
+    /// frame size: e.g. the sharp shadows of a large frame's map in a
+    /// small frame. Nothing for a scene without the shadow pass.
+    pub fn set_shadow_map(&mut self, side: u32) {
+        if let Some((_, map)) = &mut self.shadow {
+            let device = &self.gpu.device;
+            let side = side.clamp(1, device.limits().max_texture_dimension_2d);
+            let (new, bind) = shadow_resources(device, &self.shadow_layout, Some(side));
+            if let Some(new) = new {
+                *map = new;
+                self.shadow_bind = bind;
+            }
+        }
     }
 
     /// Sets the adaptive rendering window (GFFE §4.3); off by default.
@@ -692,6 +694,53 @@ impl Renderer {
     }
 }
 
+/// The shadow map of `side` texels a side (none without a side) and the
+/// bind group that samples it. Without a shadow pass the shader never
+/// samples the map, but the layout still needs a texture: a 1×1 one.
+fn shadow_resources(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    side: Option<u32>,
+) -> (Option<wgpu::Texture>, wgpu::BindGroup) {
+    let texture = |label, side, usage| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: side,
+                height: side,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: SHADOW_FORMAT,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let map = side.map(|side| {
+        texture(
+            "shadow map",
+            side,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        )
+    });
+    let view = match &map {
+        Some(map) => map.create_view(&Default::default()),
+        None => texture("no shadow map", 1, wgpu::TextureUsages::TEXTURE_BINDING)
+            .create_view(&Default::default()),
+    };
+    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("shadow"),
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        compare: Some(wgpu::CompareFunction::LessEqual),
+        ..Default::default()
+    });
+    let bind = gpu_device::view_and_sampler(device, "shadow map", layout, &view, &sampler);
+    (map, bind)
+}
+
 fn upload(device: &wgpu::Device, mesh: &Mesh) -> GpuMesh {
     let (lo, hi) = mesh.bounds();
     let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
@@ -708,5 +757,29 @@ fn upload(device: &wgpu::Device, mesh: &Mesh) -> GpuMesh {
         }),
         count: mesh.indices.len() as u32,
         bounds: ((lo + hi) * 0.5, (hi - lo).length() * 0.5),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shadow_map_keeps_its_density_against_the_frame() {
+        let side = |w, h| shadow_map_side(FrameSize::new(w, h));
+        // The density was set at 1280×720 with a 2048² map.
+        assert_eq!(side(1280, 720), 2048);
+        assert_eq!(side(640, 360), 1024);
+        // Portrait frames go by their longer side too.
+        assert_eq!(side(360, 640), 1024);
+        assert_eq!(side(720, 1280), 2048);
+        // Rounded up to a multiple of the step, within the bounds.
+        assert_eq!(side(960, 540), 1536);
+        assert_eq!(side(1000, 10), 1600);
+        assert_eq!(side(320, 180), SHADOW_MAP_MIN);
+        assert_eq!(side(96, 54), SHADOW_MAP_MIN);
+        assert_eq!(side(1, 1), SHADOW_MAP_MIN);
+        assert_eq!(side(1920, 1080), SHADOW_MAP_MAX);
+        assert_eq!(side(u32::MAX, u32::MAX), SHADOW_MAP_MAX);
     }
 }

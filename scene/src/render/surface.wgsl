@@ -72,8 +72,14 @@ fn pattern(uv: vec2<f32>, tex: vec4<f32>) -> f32 {
 }
 
 // Fraction of light reaching `camrel` from the shadow-map light, 3×3 PCF.
+// The receiver's biases (a normal offset and a depth offset) were set for
+// a 2048² map and grow with the texel: a coarser map's texel spans more
+// depth on a slope, and fixed biases let the surface shadow itself in
+// bands (acne).
 fn shadow(camrel: vec3<f32>, n: vec3<f32>) -> f32 {
-    let c = frame.shadow_from_camrel * vec4<f32>(camrel + n * 0.02, 1.0);
+    let texels = vec2<f32>(textureDimensions(shadow_map));
+    let coarse = 2048.0 / texels.x;
+    let c = frame.shadow_from_camrel * vec4<f32>(camrel + n * (0.02 * coarse), 1.0);
     if c.w <= 0.0 {
         return 1.0;
     }
@@ -82,12 +88,12 @@ fn shadow(camrel: vec3<f32>, n: vec3<f32>) -> f32 {
     if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
         return 1.0;
     }
-    let texel = 1.0 / vec2<f32>(textureDimensions(shadow_map));
+    let texel = 1.0 / texels;
     var sum = 0.0;
     for (var y = -1; y <= 1; y++) {
         for (var x = -1; x <= 1; x++) {
             let o = vec2<f32>(f32(x), f32(y)) * texel;
-            sum += textureSampleCompareLevel(shadow_map, shadow_sampler, uv + o, ndc.z - 0.0015);
+            sum += textureSampleCompareLevel(shadow_map, shadow_sampler, uv + o, ndc.z - 0.0015 * coarse);
         }
     }
     return sum / 9.0;
