@@ -34,7 +34,7 @@ fn render(c: &mut Criterion) {
         let scene = Scene::load(&format!("builtin:{name}")).expect("built-in scene");
         let mut r = Renderer::new(scene, size, Path::new(".")).expect("renderer");
         if let Some(side) = shadow_map() {
-            r.set_shadow_map(side);
+            r.set_shadow_map(side).expect("shadow map");
         }
         let mut k = 30;
         group.bench_function(name, |b| {

@@ -469,7 +469,7 @@ fn the_shadow_map_follows_the_frame_and_can_be_pinned() {
     );
     assert_eq!(r.shadow_map(), Some(1024));
     let coarse = r.render(12, 30.0).unwrap();
-    r.set_shadow_map(2048);
+    r.set_shadow_map(2048).unwrap();
     assert_eq!(r.shadow_map(), Some(2048));
     let sharp = r.render(12, 30.0).unwrap();
     assert_eq!(coarse.depth, sharp.depth);
@@ -481,7 +481,7 @@ fn the_shadow_map_follows_the_frame_and_can_be_pinned() {
         "{changed} pixels changed"
     );
     // Pinned to nothing: clamped to one texel, and still renders.
-    r.set_shadow_map(0);
+    r.set_shadow_map(0).unwrap();
     assert_eq!(r.shadow_map(), Some(1));
     let none = r.render(12, 30.0).unwrap();
     assert_eq!(none.depth, sharp.depth);

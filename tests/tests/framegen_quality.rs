@@ -31,7 +31,7 @@ fn recorded(scene: Scene, start: u64, count: u64) -> Vec<Frame> {
 /// (`SHADOW_MAP_MAX`), whose shadow edges are sharp at this small size.
 fn recorded_sharp(scene: Scene, start: u64, count: u64) -> Vec<Frame> {
     let mut renderer = Renderer::new(scene, SIZE, Path::new(".")).unwrap();
-    renderer.set_shadow_map(SHADOW_MAP_MAX);
+    renderer.set_shadow_map(SHADOW_MAP_MAX).unwrap();
     through_a_dump(tests::render_scene_by(
         &mut renderer,
         60.0,

@@ -279,17 +279,23 @@ impl Renderer {
     /// Draws the shadow map at `side` texels a side (clamped to 1 and the
     /// device's largest texture) instead of [`shadow_map_side`]'s for the
     /// frame size: e.g. the sharp shadows of a large frame's map in a
-    /// small frame. Nothing for a scene without the shadow pass.
-    pub fn set_shadow_map(&mut self, side: u32) {
-        if let Some((_, map)) = &mut self.shadow {
-            let device = &self.gpu.device;
-            let side = side.clamp(1, device.limits().max_texture_dimension_2d);
-            let (new, bind) = shadow_resources(device, &self.shadow_layout, Some(side));
-            if let Some(new) = new {
-                *map = new;
-                self.shadow_bind = bind;
-            }
+    /// small frame. Nothing for a scene without the shadow pass. A map the
+    /// device cannot make (out of memory) is an error, and the renderer
+    /// keeps the map it had.
+    pub fn set_shadow_map(&mut self, side: u32) -> Result<(), RenderError> {
+        let Some((_, map)) = &mut self.shadow else {
+            return Ok(());
+        };
+        let device = &self.gpu.device;
+        let side = side.clamp(1, device.limits().max_texture_dimension_2d);
+        let (new, bind) = self.gpu.checked("making a shadow map", || {
+            shadow_resources(device, &self.shadow_layout, Some(side))
+        })?;
+        if let Some(new) = new {
+            *map = new;
+            self.shadow_bind = bind;
         }
+        Ok(())
     }
 
     /// Sets the adaptive rendering window (GFFE §4.3); off by default.
