@@ -133,18 +133,20 @@ async fn repeat_shows_only_rendered_and_repeated_frames() {
 }
 
 /// The wgpu backend in the same loop: it runs and accounts every slot it
-/// presents (how many it keeps up with depends on the adapter). At 10 fps
-/// (20 Hz display), for four seconds: on lavapipe a push can take longer
-/// than a 30 fps render interval on a loaded two-core machine, and a
-/// presenter that always has a newer rendered frame to show never
-/// generates one (seen twice at 30 fps: 11 and 28 rendered frames, no
-/// generated one).
+/// presents (how many it keeps up with depends on the adapter). A slot
+/// between two rendered frames is extrapolated only when the push of the
+/// first ends before that slot's vsync, half a render interval on: at
+/// 2 fps (4 Hz display, 250 ms), for six seconds. On lavapipe a push took
+/// longer than a 30 fps render interval on a loaded two-core machine (11
+/// and 28 rendered frames, no generated one), and 187 ms at the median,
+/// more than 10 fps's half interval, in a clean-clone CI run whose
+/// neighbouring tests each ran a server (5 rendered, none generated).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_wgpu_backend_presents_generated_frames() {
-    let seconds = 4.0;
+    let seconds = 6.0;
     // Without shading correction (its cost is not what this checks), as
     // lavapipe shares the two cores with the server's renderer.
-    let r = present_at(WindowMode::Off, 10.0, Method::Gffe, seconds, true, |c| {
+    let r = present_at(WindowMode::Off, 2.0, Method::Gffe, seconds, true, |c| {
         c.shading = false
     })
     .await;
@@ -157,7 +159,7 @@ async fn the_wgpu_backend_presents_generated_frames() {
         r.generation_ms,
         r.ingest_ms
     );
-    assert!((r.display_fps - 20.0).abs() < 0.01);
+    assert!((r.display_fps - 4.0).abs() < 0.01);
     let slots = (seconds * r.display_fps).floor() as i64 + 1;
     assert!((r.records.len() as i64 + r.missed_vsyncs as i64 - slots).abs() <= 1);
 }
