@@ -17,7 +17,9 @@ use protocol::wire::{
 use protocol::{Codec, Frame, FrameSize, Limits};
 use tokio::sync::mpsc;
 
-use crate::receiver::{FrameReceiver, IN_FLIGHT_FRAMES, ReceiveError, StreamId, frame_bytes_bound};
+use crate::receiver::{
+    FrameReceiver, IN_FLIGHT_FRAMES, Order, ReceiveError, StreamId, frame_bytes_bound,
+};
 use crate::tls::{Pin, PinError};
 
 /// How to reach and authenticate to a server.
@@ -271,7 +273,16 @@ pub async fn connect(config: ConnectConfig) -> Result<Session, ConnectError> {
 
     let limits = config.limits.min(Limits::for_frames(welcome.max_frame));
     let byte_budget = IN_FLIGHT_FRAMES * frame_bytes_bound(&limits, welcome.buffers.len());
-    let receiver = FrameReceiver::new(limits, MAX_FRAME_STREAMS).with_byte_budget(byte_budget);
+    // Video-coded colour predicts each frame from the one before: a frame
+    // overtaken by a newer one is waited for, not superseded.
+    let order = if welcome.buffers.iter().any(|b| b.codec == Codec::H264) {
+        Order::Every
+    } else {
+        Order::Newest
+    };
+    let receiver = FrameReceiver::new(limits, MAX_FRAME_STREAMS)
+        .with_byte_budget(byte_budget)
+        .with_order(order);
     let stats = Arc::new(Mutex::new(SessionStats::default()));
     let (frames_tx, frames_rx) = mpsc::channel(config.queue.max(1));
     let (chunks_tx, chunks_rx) = mpsc::channel::<StreamEvent>(256);
@@ -343,6 +354,8 @@ async fn read_message(
 }
 
 enum StreamEvent {
+    /// Accepted, in stream order, before any of its data.
+    Open(StreamId),
     Data(StreamId, bytes::Bytes),
     End(StreamId),
     Reset(StreamId),
@@ -355,9 +368,12 @@ async fn accept_streams(
     cancelled: Arc<Mutex<HashSet<StreamId>>>,
 ) {
     while let Ok(mut recv) = conn.accept_uni().await {
+        let id = recv.id().index();
+        if tx.send(StreamEvent::Open(id)).await.is_err() {
+            return;
+        }
         let (tx, cancelled) = (tx.clone(), cancelled.clone());
         tokio::spawn(async move {
-            let id = recv.id().index();
             // However the stream ends, its id leaves the cancelled set, so
             // the set holds only streams still being read (issue 18 §10).
             let _forget = Forget(&cancelled, id);
@@ -473,10 +489,13 @@ async fn assemble(
                 }
                 None
             }
-            StreamEvent::Reset(id) => {
-                receiver.on_stream_reset(id);
+            StreamEvent::Open(id) => {
+                if let Err(e) = receiver.on_stream_open(id) {
+                    return broken(e);
+                }
                 None
             }
+            StreamEvent::Reset(id) => Some(receiver.on_stream_reset(id)),
         };
         if let Ok(mut s) = stats.lock() {
             s.client = ClientStats {
@@ -490,88 +509,87 @@ async fn assemble(
                 cancel(&mut c, &delivery.cancel);
             }
         }
-        let Some(encoded) = delivery.frame else {
-            continue;
-        };
-        let received = Instant::now();
-        let input = encoded.header.input;
-        let video = encoded
-            .header
-            .buffers
-            .iter()
-            .any(|b| b.codec == Codec::H264);
-        if video && color.is_none() {
-            match video::ColorDecoder::new() {
-                Ok(d) => color = Some(d),
+        for encoded in delivery.frames {
+            let received = Instant::now();
+            let input = encoded.header.input;
+            let video = encoded
+                .header
+                .buffers
+                .iter()
+                .any(|b| b.codec == Codec::H264);
+            if video && color.is_none() {
+                match video::ColorDecoder::new() {
+                    Ok(d) => color = Some(d),
+                    Err(e) => {
+                        // The hello did not list H.264 then: the server broke
+                        // the agreement.
+                        return fail(ReceiveError::Stream {
+                            stream: 0,
+                            source: AssembleError::Codec {
+                                kind: protocol::BufferKind::Color,
+                                source: protocol::codec::CodecError::Stream {
+                                    codec: Codec::H264,
+                                    source: Box::new(e),
+                                },
+                            },
+                        });
+                    }
+                }
+            }
+            // Decoding takes milliseconds per frame: off the runtime, the
+            // decoder going with the frame and coming back.
+            let mut decoder = color.take();
+            let decoded = tokio::task::spawn_blocking(move || {
+                let frame = encoded.decode_with(
+                    decoder
+                        .as_mut()
+                        .map(|d| d as &mut dyn protocol::codec::stream::ColorStreamDecoder),
+                );
+                (decoder, frame)
+            })
+            .await;
+            let Ok((decoder, decoded)) = decoded else {
+                // The runtime is shutting down.
+                return;
+            };
+            color = decoder;
+            match decoded {
+                Ok(frame) => {
+                    if let Ok(mut s) = stats.lock() {
+                        s.last_decoded = Some(frame.meta.index);
+                    }
+                    let arrived = Arrived {
+                        frame,
+                        received,
+                        decoded: Instant::now(),
+                        input,
+                    };
+                    if frames.send(arrived).await.is_err() {
+                        return;
+                    }
+                }
+                Err(AssembleError::Codec {
+                    kind: protocol::BufferKind::Color,
+                    source: protocol::codec::CodecError::Stream { source, .. },
+                }) => {
+                    // This frame is lost; the stream goes on from a keyframe.
+                    tracing::debug!("colour of a frame not decoded: {source}");
+                    let ask = asked.is_none_or(|at| at.elapsed() >= KEYFRAME_RETRY);
+                    if let Ok(mut s) = stats.lock() {
+                        s.color_errors += 1;
+                        s.keyframe_requests += u64::from(ask);
+                    }
+                    if ask {
+                        asked = Some(Instant::now());
+                        keyframe.notify_one();
+                    }
+                }
                 Err(e) => {
-                    // The hello did not list H.264 then: the server broke
-                    // the agreement.
                     return fail(ReceiveError::Stream {
                         stream: 0,
-                        source: AssembleError::Codec {
-                            kind: protocol::BufferKind::Color,
-                            source: protocol::codec::CodecError::Stream {
-                                codec: Codec::H264,
-                                source: Box::new(e),
-                            },
-                        },
+                        source: e,
                     });
                 }
-            }
-        }
-        // Decoding takes milliseconds per frame: off the runtime, the
-        // decoder going with the frame and coming back.
-        let mut decoder = color.take();
-        let decoded = tokio::task::spawn_blocking(move || {
-            let frame = encoded.decode_with(
-                decoder
-                    .as_mut()
-                    .map(|d| d as &mut dyn protocol::codec::stream::ColorStreamDecoder),
-            );
-            (decoder, frame)
-        })
-        .await;
-        let Ok((decoder, decoded)) = decoded else {
-            // The runtime is shutting down.
-            return;
-        };
-        color = decoder;
-        match decoded {
-            Ok(frame) => {
-                if let Ok(mut s) = stats.lock() {
-                    s.last_decoded = Some(frame.meta.index);
-                }
-                let arrived = Arrived {
-                    frame,
-                    received,
-                    decoded: Instant::now(),
-                    input,
-                };
-                if frames.send(arrived).await.is_err() {
-                    return;
-                }
-            }
-            Err(AssembleError::Codec {
-                kind: protocol::BufferKind::Color,
-                source: protocol::codec::CodecError::Stream { source, .. },
-            }) => {
-                // This frame is lost; the stream goes on from a keyframe.
-                tracing::debug!("colour of a frame not decoded: {source}");
-                let ask = asked.is_none_or(|at| at.elapsed() >= KEYFRAME_RETRY);
-                if let Ok(mut s) = stats.lock() {
-                    s.color_errors += 1;
-                    s.keyframe_requests += u64::from(ask);
-                }
-                if ask {
-                    asked = Some(Instant::now());
-                    keyframe.notify_one();
-                }
-            }
-            Err(e) => {
-                return fail(ReceiveError::Stream {
-                    stream: 0,
-                    source: e,
-                });
             }
         }
     }

@@ -26,6 +26,6 @@ pub mod viewer;
 pub mod window;
 
 pub use connect::{Arrived, ConnectConfig, ConnectError, Session, SessionStats, connect};
-pub use receiver::{Delivery, FrameReceiver, ReceiveError, StreamId};
+pub use receiver::{Delivery, FrameReceiver, Order, ReceiveError, StreamId};
 pub use reconnect::{ReconnectPolicy, Stream, StreamStats};
 pub use tls::Pin;

@@ -7,6 +7,12 @@
 //! then again every [`KEYFRAME_RETRY`] while it waits. That bound is also
 //! all one client can make the shared producer spend on keyframes.
 //!
+//! The producer is shared by every session, so it bounds its keyframes
+//! itself too ([`KeyframeBudget`]): however many sessions ask, it forces
+//! one at most every [`KEYFRAME_RETRY`] after the last keyframe it made,
+//! so all its sessions together cost it no more than one lossy session
+//! can (issue 18: one client never disturbs another).
+//!
 //! Without video-coded colour every frame is a keyframe and nothing is
 //! ever held back.
 
@@ -94,9 +100,61 @@ impl Recovery {
     }
 }
 
+/// The producer's side: when a pending keyframe request may be granted.
+/// Sans-IO; the producer says when it made a keyframe (forced or the
+/// encoder's periodic one) and asks before each frame.
+#[derive(Debug, Default)]
+pub struct KeyframeBudget {
+    last: Option<Instant>,
+}
+
+impl KeyframeBudget {
+    /// Whether a request may force the frame encoded `now` to be a
+    /// keyframe: the last keyframe is at least [`KEYFRAME_RETRY`] old (a
+    /// request not granted stays pending until then).
+    pub fn allows(&self, now: Instant) -> bool {
+        self.last
+            .is_none_or(|at| now.saturating_duration_since(at) >= KEYFRAME_RETRY)
+    }
+
+    /// A keyframe was made `now`.
+    pub fn made(&mut self, now: Instant) {
+        self.last = Some(now);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Requests before every frame from any number of sessions: keyframes
+    /// come no closer than the retry time, and a periodic one counts.
+    #[test]
+    fn the_producer_forces_a_keyframe_at_most_once_a_retry_period() {
+        let t0 = Instant::now();
+        let frame = Duration::from_millis(33);
+        let mut budget = KeyframeBudget::default();
+        let mut made = vec![];
+        for k in 0..90u32 {
+            let now = t0 + frame * k;
+            // The encoder makes a periodic keyframe at frame 42.
+            if budget.allows(now) || k == 42 {
+                budget.made(now);
+                made.push(k);
+            }
+        }
+        assert_eq!(made[0], 0, "the first request is granted at once");
+        assert!(made.contains(&42));
+        for w in made.windows(2) {
+            assert!(
+                frame * (w[1] - w[0]) >= KEYFRAME_RETRY || w[1] == 42,
+                "{made:?}"
+            );
+        }
+        // 150 ms is five frames of 33 ms: every fifth frame, the periodic
+        // one shifting the rest (0, 5, ..., 40, 42, 47, ..., 87).
+        assert_eq!(made.len(), 19, "{made:?}");
+    }
 
     #[test]
     fn a_session_waits_for_a_keyframe_and_asks_at_a_bounded_rate() {

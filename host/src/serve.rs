@@ -340,6 +340,8 @@ async fn connection(
         client.clone(),
     ));
     let permits = Arc::new(Semaphore::new(MAX_IN_FLIGHT));
+    // Signalled (dropped) when the last frame's stream is open.
+    let mut previous_opened = tokio::sync::oneshot::channel::<()>().1;
     let result = loop {
         let frame = tokio::select! {
             r = rx.recv() => r,
@@ -388,13 +390,22 @@ async fn connection(
         };
         let conn = conn.clone();
         let client = client.clone();
+        // Streams are opened in frame order, each task after the one
+        // before: a client of video-coded colour waits for a frame on a
+        // stream opened before a newer one's (`client::Order::Every`).
+        let (opened, next) = tokio::sync::oneshot::channel::<()>();
+        let before = std::mem::replace(&mut previous_opened, next);
         // Older frames first: a frame's stream completes before a newer
         // one's, so a video decoder gets them in order.
         let priority = i32::try_from(frame.index).map_or(i32::MIN, |i| -i);
         tokio::spawn(async move {
             let _permit = permit;
             let sent = async {
-                let mut stream = conn.open_uni().await?;
+                // Done or given up, the task before has opened its stream.
+                let _ = before.await;
+                let stream = conn.open_uni().await;
+                drop(opened);
+                let mut stream = stream?;
                 stream.set_priority(priority)?;
                 stream.write_all(&frame.bytes).await?;
                 stream.finish()?;

@@ -33,6 +33,7 @@ use video::{ColorCodec, ColorEncoder};
 
 use crate::input::{InputLimits, ViewerInput};
 use crate::pacer::{Pace, Pacer};
+use crate::recovery::KeyframeBudget;
 use scene::Scene;
 use scene::render::{Renderer, ViewerPoses, WindowSettings};
 
@@ -662,6 +663,8 @@ impl Producer {
         // camera's motion since then (a skipped frame only makes that
         // prediction, never the result, less exact).
         let mut previous: Option<protocol::FrameMeta> = None;
+        // Sessions' keyframe requests, granted at a bounded rate.
+        let mut keyframes = KeyframeBudget::default();
         while !stop.load(Ordering::Relaxed) && !self.finished(k) {
             let times = self.times(k);
             let Some((t, next)) = self.readable(times, k, stats, &mut gap)? else {
@@ -692,7 +695,7 @@ impl Producer {
             };
             gap.run = 0;
             frame.meta.cut |= std::mem::take(&mut gap.cut_next);
-            if frames.keyframe.take() {
+            if keyframes.allows(started) && frames.keyframe.take() {
                 if let Some(c) = color.as_deref_mut() {
                     c.request_keyframe();
                 }
@@ -726,6 +729,9 @@ impl Producer {
                 .iter()
                 .zip(&encoded.payloads)
                 .all(|(b, p)| b.codec != Codec::H264 || video::is_keyframe(&p.data));
+            if keyframe {
+                keyframes.made(started);
+            }
             frames.send(Arc::new(StreamFrame {
                 index: frame.meta.index,
                 bytes,

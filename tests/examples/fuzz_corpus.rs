@@ -127,10 +127,17 @@ fn main() -> anyhow::Result<()> {
             .to_stream_bytes()
         })
         .collect::<Result<Vec<_>, _>>()?;
-    // The receiver target's events (see `fuzz/fuzz_targets/receiver.rs`):
-    // frame 0 then frame 1, each on its stream to its end; and frame 1
-    // overtaking frame 0, interleaved chunk by chunk.
-    let in_order = [events(0, &streams[0]), events(1, &streams[1])].concat();
+    // The receiver target's input (see `fuzz/fuzz_targets/receiver.rs`):
+    // an order byte (0 newest, 1 every frame), then events: frame 0 then
+    // frame 1, each on its stream to its end; and frame 1 overtaking frame
+    // 0, interleaved chunk by chunk, in either order, the transport having
+    // opened both streams first in the second.
+    let in_order = [
+        vec![vec![0]],
+        events(0, &streams[0]),
+        events(1, &streams[1]),
+    ]
+    .concat();
     write(&out.join("receiver"), "in-order", &in_order.concat())?;
     let (late, early) = (events(2, &streams[0]), events(3, &streams[1]));
     let mut overtaken = vec![];
@@ -139,7 +146,18 @@ fn main() -> anyhow::Result<()> {
             overtaken.extend_from_slice(e);
         }
     }
-    write(&out.join("receiver"), "overtaken", &overtaken)?;
+    write(
+        &out.join("receiver"),
+        "overtaken",
+        &[&[0][..], &overtaken].concat(),
+    )?;
+    // An open event: the op's top bit with kind 3.
+    let open = |stream: u8| 0x80 | stream << 2 | 3;
+    write(
+        &out.join("receiver"),
+        "overtaken-every",
+        &[&[1, open(2), open(3)][..], &overtaken].concat(),
+    )?;
     for (target, token) in [("decode", "token"), ("hello", "fuzz-token")] {
         let hello = Message::Hello(Hello {
             version: WIRE_VERSION,

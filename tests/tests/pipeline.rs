@@ -78,7 +78,7 @@ fn dump_replay_stream_receive_decode() {
             if end == s.len() {
                 rx.on_stream_end(id as u64).unwrap();
             }
-            if let Some(f) = d.frame {
+            for f in d.frames {
                 delivered.push(f.decode().unwrap());
             }
             cancelled.extend(d.cancel);

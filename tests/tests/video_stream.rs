@@ -26,6 +26,19 @@ fn color_psnr(got: &Frame, want: &Frame) -> f64 {
     video::transfer::display_psnr(&want.color, &got.color)
 }
 
+/// The frames `session` shows in `span` (fewer if it ends or stalls).
+async fn frames_for(session: &mut client::Session, span: Duration) -> Vec<Frame> {
+    let mut got = vec![];
+    let started = std::time::Instant::now();
+    while started.elapsed() < span {
+        match tokio::time::timeout(Duration::from_secs(2), session.frames.recv()).await {
+            Ok(Some(a)) => got.push(a.frame),
+            Ok(None) | Err(_) => break,
+        }
+    }
+    got
+}
+
 /// A client joining a running H.264 stream over a lossy, reordering link
 /// (the one of `frames_cross_an_impaired_network`, where the server drops
 /// frames for a client with too many unacknowledged): it starts at a
@@ -40,14 +53,7 @@ async fn video_coded_colour_recovers_at_keyframes_on_an_impaired_link() {
     tokio::time::sleep(Duration::from_millis(300)).await;
     let (relay, mut session) = fx.connect_impaired(5).await;
     let originals = fx.originals();
-    let mut got = vec![];
-    let started = std::time::Instant::now();
-    while started.elapsed() < Duration::from_secs(4) {
-        match tokio::time::timeout(Duration::from_secs(2), session.frames.recv()).await {
-            Ok(Some(a)) => got.push(a.frame),
-            Ok(None) | Err(_) => break,
-        }
-    }
+    let got = frames_for(&mut session, Duration::from_secs(4)).await;
     source.stop();
     let stats = session.stats();
     eprintln!(
@@ -72,6 +78,85 @@ async fn video_coded_colour_recovers_at_keyframes_on_an_impaired_link() {
     }
     assert!(stats.color_errors == 0 || stats.keyframe_requests > 0);
     session.close().await;
+    fx.server.shutdown().await;
+}
+
+/// On a link that loses 10 % of its datagrams with 20 ms of jitter, a
+/// frame whose last packet is retransmitted is often overtaken by the next
+/// one. The client waits for it (`client::Order::Every`) instead of
+/// superseding it, so the chain of predicted pictures never breaks on the
+/// client's side: no colour error, no keyframe asked, and nearly every
+/// frame shown. Superseding instead (the order for frames that stand
+/// alone) broke it several times a second here.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_overtaken_video_frame_is_waited_for_not_lost() {
+    let fx = fixture(StreamBuffer::compact_set(Codec::H264).to_vec()).await;
+    let (relay, mut session) = fx.connect_through("loss=10%,jitter=20ms,seed=7").await;
+    let source = fx.start_source_with(true, h264_at_2_mbit());
+    let got = frames_for(&mut session, Duration::from_secs(4)).await;
+    source.stop();
+    let stats = session.stats();
+    let dropped = fx
+        .server
+        .counters
+        .frames_dropped
+        .load(std::sync::atomic::Ordering::Relaxed);
+    eprintln!(
+        "h264, 10 % loss: {} frames shown in 4 s, {} colour errors, {} keyframes asked, {} late, server dropped {dropped}, relay {:?}",
+        got.len(),
+        stats.color_errors,
+        stats.keyframe_requests,
+        stats.client.frames_late,
+        relay.downstream.snapshot(),
+    );
+    assert_eq!(
+        (
+            stats.color_errors,
+            stats.keyframe_requests,
+            stats.client.frames_late
+        ),
+        (0, 0, 0)
+    );
+    // 20 fps for 4 s; frames the server dropped (a client with too many
+    // unacknowledged) wait for a keyframe there.
+    assert!(got.len() >= 60, "{} frames", got.len());
+    assert!(got.windows(2).all(|w| w[0].meta.index < w[1].meta.index));
+    session.close().await;
+    fx.server.shutdown().await;
+}
+
+/// Sessions asking for a keyframe before every frame (many lossy clients
+/// at once) get one at most every `host::recovery::KEYFRAME_RETRY`: the
+/// shared producer spends no more on keyframes for all of them than for
+/// one. Before the producer bounded it, every frame was a keyframe.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn keyframe_requests_from_all_sessions_are_granted_at_a_bounded_rate() {
+    let fx = fixture(StreamBuffer::compact_set(Codec::H264).to_vec()).await;
+    let mut frames = fx.frames.subscribe();
+    let keyframes = fx.frames.keyframes();
+    keyframes.request();
+    let source = fx.start_source_with(true, h264_at_2_mbit());
+    let (mut produced, mut keyed) = (0u32, 0u32);
+    let started = std::time::Instant::now();
+    while started.elapsed() < Duration::from_secs(2) {
+        match tokio::time::timeout(Duration::from_secs(2), frames.recv()).await {
+            Ok(Ok(f)) => {
+                produced += 1;
+                keyed += u32::from(f.keyframe);
+                keyframes.request();
+            }
+            Ok(Err(tokio::sync::broadcast::error::RecvError::Lagged(_))) => {}
+            Ok(Err(_)) | Err(_) => break,
+        }
+    }
+    let elapsed = started.elapsed();
+    source.stop();
+    let bound = 1 + (elapsed.as_secs_f64() / host::recovery::KEYFRAME_RETRY.as_secs_f64()) as u32;
+    eprintln!(
+        "{keyed} keyframes of {produced} frames in {elapsed:?}, asked before each (bound {bound})"
+    );
+    assert!(produced >= 20, "{produced} frames");
+    assert!((3..=bound).contains(&keyed), "{keyed} keyframes");
     fx.server.shutdown().await;
 }
 

@@ -105,10 +105,19 @@ impl Fixture {
     /// them by 5 ms (± 2 ms) and reorders 0.5 %, its randomness from `seed`
     /// (the relay must outlive the session).
     pub async fn connect_impaired(&self, seed: u64) -> (client::impair::Relay, client::Session) {
-        let imp: client::impair::Impairment =
-            format!("loss=1%,delay=5ms,jitter=2ms,reorder=0.5%,seed={seed}")
-                .parse()
-                .unwrap();
+        self.connect_through(&format!(
+            "loss=1%,delay=5ms,jitter=2ms,reorder=0.5%,seed={seed}"
+        ))
+        .await
+    }
+
+    /// A session through a relay impaired as `impairment` says (the
+    /// `--impair` syntax).
+    pub async fn connect_through(
+        &self,
+        impairment: &str,
+    ) -> (client::impair::Relay, client::Session) {
+        let imp: client::impair::Impairment = impairment.parse().unwrap();
         let relay = client::impair::Relay::start(self.addr(), imp)
             .await
             .unwrap();
