@@ -69,10 +69,14 @@ impl Layouts {
 
 const COMMON: &str = include_str!("common.wgsl");
 
+/// A pass's shader: `common.wgsl`, the pass's WGSL, and the Rust constants
+/// the WGSL needs (`SHADOW_MAP_MAX`: the receiver's shadow biases were set
+/// for the largest map and grow with the texel).
 fn module(device: &wgpu::Device, label: &str, pass_source: &str) -> wgpu::ShaderModule {
+    let constants = format!("const SHADOW_MAP_MAX: f32 = {}.0;", super::SHADOW_MAP_MAX);
     device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(format!("{COMMON}\n{pass_source}").into()),
+        source: wgpu::ShaderSource::Wgsl(format!("{constants}\n{COMMON}\n{pass_source}").into()),
     })
 }
 

@@ -73,12 +73,13 @@ fn pattern(uv: vec2<f32>, tex: vec4<f32>) -> f32 {
 
 // Fraction of light reaching `camrel` from the shadow-map light, 3×3 PCF.
 // The receiver's biases (a normal offset and a depth offset) were set for
-// a 2048² map and grow with the texel: a coarser map's texel spans more
+// the largest map (SHADOW_MAP_MAX², from Rust) and grow with the texel: a
+// coarser map's texel spans more
 // depth on a slope, and fixed biases let the surface shadow itself in
 // bands (acne).
 fn shadow(camrel: vec3<f32>, n: vec3<f32>) -> f32 {
     let texels = vec2<f32>(textureDimensions(shadow_map));
-    let coarse = 2048.0 / texels.x;
+    let coarse = SHADOW_MAP_MAX / texels.x;
     let c = frame.shadow_from_camrel * vec4<f32>(camrel + n * (0.02 * coarse), 1.0);
     if c.w <= 0.0 {
         return 1.0;
