@@ -113,7 +113,8 @@ pub struct SessionStats {
 pub struct Arrived {
     /// The frame.
     pub frame: Frame,
-    /// When its last byte had been taken from the connection.
+    /// When its last byte had been taken from the connection (a video
+    /// frame that waited for an older one: when that one came).
     pub received: Instant,
     /// When it was decoded (it could be shown from then on).
     pub decoded: Instant,

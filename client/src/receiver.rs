@@ -331,13 +331,11 @@ impl FrameReceiver {
                 if self.waits(index, stream) {
                     break;
                 }
+                // Held frames are newer than any delivered (`on_data`), and
+                // leave oldest first.
                 let Some((_, (stream, frame))) = self.held.pop_first() else {
                     break;
                 };
-                if self.last_delivered.is_some_and(|last| index <= last) {
-                    self.stats.frames_late += 1;
-                    continue;
-                }
                 self.last_delivered = Some(index);
                 delivery.cancel.extend(self.supersede(index, stream));
                 delivery.frames.push(frame);
