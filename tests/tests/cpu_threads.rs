@@ -141,6 +141,13 @@ fn recycled_buffers_leave_no_trace() {
     }
     .track_into(History::empty());
     assert!(fresh.track.iter().any(|w| history::is_confirmed(*w)));
+    // A confirmed pixel always has a position (the background seeds level
+    // 0 from the track word alone, `background::seeds`), also where the
+    // depth has none.
+    let invalid = framegen::passes::common::camera::W_INVALID;
+    let positioned = |(w, p): (&u32, &[f32; 4])| !history::is_confirmed(*w) || p[3] != invalid;
+    assert!(fresh.track.iter().zip(&fresh.positions).all(positioned));
+    assert!(fresh.positions[..n].iter().any(|p| p[3] == invalid));
     assert!(!unconfirmed.track.iter().any(|w| history::is_confirmed(*w)));
     let without = |t: &[u32]| t.iter().map(|w| w & !2).collect::<Vec<_>>();
     assert_eq!(without(&fresh.track), without(&unconfirmed.track));

@@ -430,8 +430,8 @@ impl Executor for CpuBackend {
             // Level 0's fragments seeded by this frame's own static pixels
             // land where the warp already wrote (`background::seeds`): they
             // cannot fill a hole, so they are not projected.
-            let (track, positions) = (&cur.history.track, &cur.history.positions);
-            let seeded = |i: usize| i < track.len() && background::seeds(track[i], positions[i]);
+            let track = &cur.history.track;
+            let seeded = |i: usize| track.get(i).is_some_and(|&t| background::seeds(t));
             let winners = splat::resolve_with(bg.len(), slots, |i| {
                 if seeded(i) {
                     return splat::Candidate::MISS;

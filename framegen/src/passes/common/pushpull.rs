@@ -231,8 +231,14 @@ pub fn resolve(pyramid: &[Texel], levels: Levels, out: &mut Output) {
     });
 }
 
-/// The whole CPU reference: fills every hole of `out`.
+/// The whole CPU reference: fills every hole of `out`. A frame without
+/// holes is left as it is, without building the pyramid (the resolve
+/// writes only holes).
 pub fn fill(out: &mut Output, levels: u32) {
+    use rayon::prelude::*;
+    if !out.mask.par_iter().any(|&m| m == EMPTY) {
+        return;
+    }
     let layout = layout(out.width, out.height, levels);
     // Every stored texel is written by `pull` before anything reads it.
     let mut pyramid = crate::par::filled(Texel::default(), stored(layout).1 as usize);

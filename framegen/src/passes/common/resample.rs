@@ -31,7 +31,9 @@
 //!
 //! Filtering runs on linear HDR colour, as it arrives.
 //! `resample.wgsl` ([`WGSL`]) mirrors [`resample`] operation by operation
-//! for the kernels that resample (the warp, interpolation's resolve).
+//! for the kernels that resample (the warp, interpolation's resolve), but
+//! for the Catmull-Rom taps' surface test: the kernel tests them one by
+//! one, the CPU by their range ([`all_on_surface`], the same answer).
 
 use glam::{Vec2, Vec4};
 
@@ -102,10 +104,28 @@ pub const SAME_SURFACE_RATIO: f32 = 1.1;
 /// a surface; two skies agree, a sky and a point do not.)
 #[inline]
 pub fn same_surface(a: f32, b: f32) -> bool {
-    // Selects and non-short-circuit `&`, no branches: the resampling
-    // filter asks this of 16 taps per pixel.
+    // Selects and non-short-circuit `&`, no branches: the bilinear taps
+    // and the shading estimate ask this per pixel.
     let (lo, hi) = if a >= b { (b, a) } else { (a, b) };
     (lo > 0.0) & (hi <= lo * SAME_SURFACE_RATIO)
+}
+
+/// Whether every depth of `taps` is on the surface of depth `d0`
+/// (`same_surface(d, d0)` for each), as one test of their range: the
+/// nearest and the farthest, `d0` among them, within the ratio of `d0`
+/// and positive. The same answer as the tests one by one (rounding of
+/// `d · ratio` is monotonic), without early exits or a branch per tap:
+/// the Catmull-Rom filter asks it of 16 taps per pixel, most of them
+/// inside a surface. A NaN tap fails, as `same_surface` says of it.
+#[inline]
+fn all_on_surface(taps: impl IntoIterator<Item = f32>, d0: f32) -> bool {
+    let (mut near, mut far, mut nan) = (d0, d0, false);
+    for d in taps {
+        near = if d < near { d } else { near };
+        far = if d > far { d } else { far };
+        nan |= d.is_nan();
+    }
+    !nan & (near > 0.0) & (far <= d0 * SAME_SURFACE_RATIO) & (d0 <= near * SAME_SURFACE_RATIO)
 }
 
 /// The source image a warp resamples.
@@ -168,69 +188,160 @@ pub fn resample(src: Source<'_>, own: usize, at: Vec2, mode: Resample) -> [f32; 
     if mode == Resample::Nearest {
         return [fallback[0], fallback[1], fallback[2]];
     }
-    let (w, h) = (src.size.0 as i32, src.size.1 as i32);
-    let d0 = src.depth[own];
     let q = at - 0.5;
     let (bx, by) = (floor(q.x), floor(q.y));
-    let f = q - Vec2::new(bx as f32, by as f32);
-    // Tap columns and rows bx − 1 ..= bx + 2, by − 1 ..= by + 2, clamped
-    // into the image (rows as offsets of their first pixel).
-    let xs: [usize; 4] = std::array::from_fn(|i| (bx + i as i32 - 1).clamp(0, w - 1) as usize);
-    let ys: [usize; 4] =
-        std::array::from_fn(|j| (by + j as i32 - 1).clamp(0, h - 1) as usize * w as usize);
-    // The inner 2×2 taps (`own` is one of them) bound every result below,
-    // channel by channel: the clamped Catmull-Rom, the bilinear over any
-    // of them, `own`. Where they are flat to within the rounding of the
-    // `f16` output, no filter changes the stored colour: take `own`.
-    let c =
-        [(1, 1), (2, 1), (1, 2), (2, 2)].map(|(i, j)| Vec4::from_array(src.color[ys[j] + xs[i]]));
-    let lo = c[0].min(c[1]).min(c[2].min(c[3]));
-    let hi = c[0].max(c[1]).max(c[2].max(c[3]));
-    if (hi - lo).cmple(hi * FLAT).all() {
-        return [fallback[0], fallback[1], fallback[2]];
+    let taps = Taps {
+        f: q - Vec2::new(bx as f32, by as f32),
+        d0: src.depth[own],
+        fallback,
+        mode,
+    };
+    // Tap columns bx − 1 ..= bx + 2 and rows by − 1 ..= by + 2. Inside the
+    // image each row of taps is four neighbours, read with one bounds
+    // check; at its border they are clamped into it, one by one.
+    if let Some(window) = Window::inside(src, bx, by) {
+        return taps.filter(
+            |i, j| Vec4::from_array(window.color[j][i]),
+            |i, j| window.depth[j][i],
+        );
     }
-    if mode == Resample::CatmullRom {
-        // Every tap, without early exits: most pixels lie inside a surface.
-        let on = ys.iter().fold(true, |on, &y| {
-            xs.iter()
-                .fold(on, |on, &x| on & same_surface(src.depth[y + x], d0))
-        });
-        if on {
-            // Separable: each row along x, then the rows along y.
-            let (wx, wy) = (catmull_rom(f.x), catmull_rom(f.y));
-            let mut sum = Vec4::ZERO;
-            for (&y, wyj) in ys.iter().zip(wy) {
-                let mut across = Vec4::ZERO;
-                for (&x, wxi) in xs.iter().zip(wx) {
-                    across += Vec4::from_array(src.color[y + x]) * wxi;
+    let (w, h) = (src.size.0 as i32, src.size.1 as i32);
+    let column = |i: i32| (bx + i - 1).clamp(0, w - 1) as usize;
+    let row = |j: i32| (by + j - 1).clamp(0, h - 1) as usize * w as usize;
+    let xs = [column(0), column(1), column(2), column(3)];
+    let ys = [row(0), row(1), row(2), row(3)];
+    taps.filter(
+        |i, j| Vec4::from_array(src.color[ys[j] + xs[i]]),
+        |i, j| src.depth[ys[j] + xs[i]],
+    )
+}
+
+/// The 4×4 taps of a position whose taps all lie inside the image: four
+/// rows of four neighbours.
+struct Window<'a> {
+    color: [&'a [[f32; 4]; 4]; 4],
+    depth: [&'a [f32; 4]; 4],
+}
+
+impl<'a> Window<'a> {
+    /// The taps of columns `bx − 1 ..= bx + 2` and rows `by − 1 ..= by + 2`,
+    /// or `None` where some lie outside the image.
+    #[inline]
+    fn inside(src: Source<'a>, bx: i32, by: i32) -> Option<Self> {
+        let (w, h) = (src.size.0 as i32, src.size.1 as i32);
+        if bx < 1 || by < 1 || bx + 2 >= w || by + 2 >= h {
+            return None;
+        }
+        let first = (by - 1) as usize * w as usize + (bx - 1) as usize;
+        let row = |j: usize| {
+            let o = first + j * w as usize;
+            let color = src.color.get(o..)?.first_chunk::<4>()?;
+            let depth = src.depth.get(o..)?.first_chunk::<4>()?;
+            Some((color, depth))
+        };
+        let rows = [row(0)?, row(1)?, row(2)?, row(3)?];
+        Some(Self {
+            color: rows.map(|r| r.0),
+            depth: rows.map(|r| r.1),
+        })
+    }
+}
+
+/// What [`resample`] filters with, besides the taps themselves.
+struct Taps {
+    /// The position's fraction past the inner top-left tap's centre.
+    f: Vec2,
+    /// The depth of `own`, whose surface the taps must be on.
+    d0: f32,
+    /// `own`'s colour.
+    fallback: [f32; 4],
+    mode: Resample,
+}
+
+impl Taps {
+    /// The filtered colour from `color(i, j)` and `depth(i, j)`, tap column
+    /// `i` and row `j` of the 4×4 (the inner 2×2 are 1 and 2).
+    #[inline(always)]
+    fn filter(
+        &self,
+        color: impl Fn(usize, usize) -> Vec4,
+        depth: impl Fn(usize, usize) -> f32,
+    ) -> [f32; 3] {
+        let Self {
+            f,
+            d0,
+            fallback,
+            mode,
+        } = *self;
+        // The inner 2×2 taps (`own` is one of them) bound every result
+        // below, channel by channel: the clamped Catmull-Rom, the bilinear
+        // over any of them, `own`. Where they are flat to within the
+        // rounding of the `f16` output, no filter changes the stored
+        // colour: take `own`.
+        let c = [color(1, 1), color(2, 1), color(1, 2), color(2, 2)];
+        let lo = c[0].min(c[1]).min(c[2].min(c[3]));
+        let hi = c[0].max(c[1]).max(c[2].max(c[3]));
+        if (hi - lo).cmple(hi * FLAT).all() {
+            return [fallback[0], fallback[1], fallback[2]];
+        }
+        if mode == Resample::CatmullRom {
+            let taps = (0..4).flat_map(|j| (0..4).map(move |i| (i, j)));
+            if all_on_surface(taps.map(|(i, j)| depth(i, j)), d0) {
+                // Separable: each row along x, then the rows along y.
+                let (wx, wy) = (catmull_rom(f.x), catmull_rom(f.y));
+                let mut sum = Vec4::ZERO;
+                for (j, wyj) in wy.into_iter().enumerate() {
+                    let mut across = Vec4::ZERO;
+                    for (i, wxi) in wx.into_iter().enumerate() {
+                        across += color(i, j) * wxi;
+                    }
+                    sum += across * wyj;
                 }
-                sum += across * wyj;
+                let c = sum.clamp(lo, hi);
+                return [c.x, c.y, c.z];
             }
-            let c = sum.clamp(lo, hi);
+        }
+        let mut sum = Vec4::ZERO;
+        let mut weight = 0.0;
+        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            if same_surface(depth(dx + 1, dy + 1), d0) {
+                let wx = if dx == 0 { 1.0 - f.x } else { f.x };
+                let wy = if dy == 0 { 1.0 - f.y } else { f.y };
+                sum += color(dx + 1, dy + 1) * (wx * wy);
+                weight += wx * wy;
+            }
+        }
+        if weight > 1e-6 {
+            let c = sum / weight;
             return [c.x, c.y, c.z];
         }
+        [fallback[0], fallback[1], fallback[2]]
     }
-    let mut sum = Vec4::ZERO;
-    let mut weight = 0.0;
-    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-        let t = ys[dy + 1] + xs[dx + 1];
-        if same_surface(src.depth[t], d0) {
-            let wx = if dx == 0 { 1.0 - f.x } else { f.x };
-            let wy = if dy == 0 { 1.0 - f.y } else { f.y };
-            sum += Vec4::from_array(src.color[t]) * (wx * wy);
-            weight += wx * wy;
-        }
-    }
-    if weight > 1e-6 {
-        let c = sum / weight;
-        return [c.x, c.y, c.z];
-    }
-    [fallback[0], fallback[1], fallback[2]]
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_range_test_of_a_surface_is_the_tests_one_by_one() {
+        use proptest::prelude::*;
+        // Depths around 1 (within and beyond the ratio, exact multiples of
+        // it), and the sanitised specials: no surface, sky, NaN.
+        let depth = prop_oneof![
+            4 => 0.8f32..1.3,
+            2 => (-2i32..=2).prop_map(|k| SAME_SURFACE_RATIO.powi(k)),
+            1 => Just(0.0f32),
+            1 => Just(f32::INFINITY),
+            1 => Just(f32::NAN),
+            1 => 1e-30f32..1e30,
+        ];
+        let cases = (proptest::collection::vec(depth.clone(), 0..17), depth);
+        proptest!(ProptestConfig::with_cases(20_000), |((taps, d0) in cases)| {
+            let one_by_one = taps.iter().all(|&d| same_surface(d, d0)) & same_surface(d0, d0);
+            prop_assert_eq!(all_on_surface(taps.iter().copied(), d0), one_by_one);
+        });
+    }
 
     /// A horizontal ramp: every linear filter reproduces it exactly, so a
     /// resampled value is the ramp at the sampled position.

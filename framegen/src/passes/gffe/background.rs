@@ -29,7 +29,7 @@
 use glam::Vec3;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::passes::common::camera::{PassCamera, W_INVALID, cell, rebase};
+use crate::passes::common::camera::{PassCamera, cell, rebase};
 use crate::passes::common::levels::Levels;
 use crate::passes::common::splat::{self, Candidate, depth_key};
 use crate::passes::gffe::history::{is_confirmed, is_dynamic};
@@ -80,7 +80,7 @@ pub fn init(reuse: Vec<Texel>, from: Seeds<'_>, levels: Levels) -> Vec<Texel> {
     }
     let (level0, coarser) = bg.split_at_mut(levels.len(0) as usize);
     level0.par_iter_mut().enumerate().for_each(|(x, slot)| {
-        *slot = if seeds(track[x], p0[x]) {
+        *slot = if seeds(track[x]) {
             let c = color[x];
             Texel {
                 pos: p0[x],
@@ -97,16 +97,19 @@ pub fn init(reuse: Vec<Texel>, from: Seeds<'_>, levels: Levels) -> Vec<Texel> {
     bg
 }
 
-/// Whether a pixel of the rendered frame (its track word and `P_0`) enters
-/// level 0 of its own slot (step 1): confirmed static, with a position.
+/// Whether a pixel of the rendered frame (its track word) enters level 0
+/// of its own slot (step 1): confirmed static. It has a position: the
+/// history confirms only pixels with a valid depth (`history.rs`), so its
+/// `P_0` is never read to check (a frame-sized plane saved where the CPU
+/// executor's background projection asks).
 ///
 /// Such a fragment is exactly the pixel the forward warp moves: eq. 1 keeps
 /// a static pixel at `P_0`, so both project to the same target pixel, which
 /// the warp has therefore written. Background projection fills only holes,
 /// and a level-0 slot is one pixel, so these fragments never fill anything
 /// there, and the CPU executor skips them.
-pub fn seeds(track: u32, p0: [f32; 4]) -> bool {
-    !is_dynamic(track) && is_confirmed(track) && p0[3] != W_INVALID
+pub fn seeds(track: u32) -> bool {
+    !is_dynamic(track) && is_confirmed(track)
 }
 
 /// The candidate of previous fragment `t` of level `l` (cases 1 and 2).
