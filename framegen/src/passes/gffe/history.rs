@@ -227,11 +227,12 @@ impl Tracker<'_> {
         let width = camera.width();
         let d = depth[x];
         if d.is_nan() || d <= 0.0 {
-            *entries = [[0.0, 0.0, 0.0, W_INVALID]; MAX_HISTORY];
+            // Only the `k` entries in use are written (and stored).
+            entries[..k].fill([0.0, 0.0, 0.0, W_INVALID]);
             return 0;
         }
         let p = camera.unproject(center, d);
-        *entries = [p; MAX_HISTORY];
+        entries[..k].fill(p);
         let mut word = ((k - 1) as u32) << 2;
         if let Some(prev) = self.prev {
             let target = center + Vec2::from_array(motion[x]);
