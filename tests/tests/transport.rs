@@ -5,7 +5,6 @@
 mod loopback;
 
 use std::net::SocketAddr;
-use std::sync::Arc;
 use std::time::Duration;
 
 use client::{ConnectConfig, ConnectError, Pin};
@@ -126,38 +125,6 @@ async fn wrong_token_pin_and_version_are_refused_with_the_reason() {
             >= 2
     );
     fx.server.shutdown().await;
-}
-
-/// A raw QUIC connection that pins the fixture's certificate.
-async fn raw_connection(fx: &Fixture, max_streams: u32) -> (quinn::Endpoint, quinn::Connection) {
-    let tls = Pin::Sha256(fx.identity.fingerprint())
-        .client_config()
-        .unwrap();
-    let crypto = quinn::crypto::rustls::QuicClientConfig::try_from(tls).unwrap();
-    let mut config = quinn::ClientConfig::new(Arc::new(crypto));
-    let mut transport = quinn::TransportConfig::default();
-    transport.max_concurrent_uni_streams(max_streams.into());
-    config.transport_config(Arc::new(transport));
-    let endpoint = quinn::Endpoint::client("127.0.0.1:0".parse().unwrap()).unwrap();
-    let conn = endpoint
-        .connect_with(config, fx.addr(), "localhost")
-        .unwrap()
-        .await
-        .unwrap();
-    (endpoint, conn)
-}
-
-fn hello_bytes() -> Vec<u8> {
-    protocol::wire::encode(&protocol::wire::Message::Hello(protocol::wire::Hello {
-        version: protocol::wire::WIRE_VERSION,
-        client_name: "raw".into(),
-        token: TOKEN.into(),
-        codecs: vec![Codec::Raw, Codec::Zstd],
-        max_size: FrameSize::new(8192, 8192),
-        window_modes: vec![],
-        extras: vec![],
-    }))
-    .unwrap()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -350,87 +317,6 @@ async fn a_dump_replays_from_the_start_for_every_session() {
     }
     replay.shutdown().await;
     fx.server.shutdown().await;
-}
-
-/// Streams the fixture's dump to `session`, checks every frame arrives,
-/// then ends the session and the server.
-async fn every_frame_then_shut_down(fx: Fixture, mut session: client::Session) {
-    let source = fx.start_source();
-    let got = receive_all(&mut session).await;
-    assert_eq!(got.len(), FRAMES as usize);
-    source.stop();
-    session.close().await;
-    fx.server.shutdown().await;
-}
-
-/// The process's resident memory, bytes (Linux).
-fn resident_bytes() -> u64 {
-    let statm = std::fs::read_to_string("/proc/self/statm").unwrap();
-    let pages: u64 = statm.split_whitespace().nth(1).unwrap().parse().unwrap();
-    pages * 4096
-}
-
-/// Before authentication the server reads nothing but a `Hello` (issue 18
-/// §1–2): 32 unauthenticated clients each announce a 500 MiB payload and
-/// push 4 MiB of it. Each is refused from the 8-byte header at once (not
-/// by the hello timeout), the server's memory does not grow by a MiB per
-/// connection, a client cannot open a stream besides its control stream,
-/// and a healthy client is not disturbed.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn only_a_hello_is_read_before_authentication() {
-    let fx = fixture(StreamBuffer::default_set(Codec::Zstd).to_vec()).await;
-    let healthy = client::connect(fx.config()).await.unwrap();
-    let header = [
-        &(500u32 << 20).to_le_bytes()[..],
-        &protocol::wire::WIRE_VERSION.to_le_bytes(),
-        &(protocol::wire::MessageKind::Payload as u16).to_le_bytes(),
-    ]
-    .concat();
-    let body = vec![0x5au8; 4 << 20];
-    const CLIENTS: u64 = 32;
-    let before = resident_bytes();
-    let started = std::time::Instant::now();
-    let mut held = Vec::new();
-    for _ in 0..CLIENTS {
-        let (endpoint, conn) = raw_connection(&fx, 8).await;
-        let (mut send, _recv) = conn.open_bi().await.unwrap();
-        send.write_all(&header).await.unwrap();
-        let _ = tokio::time::timeout(Duration::from_secs(1), send.write_all(&body)).await;
-        held.push((endpoint, conn, send));
-    }
-    let grown = resident_bytes().saturating_sub(before);
-    for (_, conn, _) in &held {
-        let reason = tokio::time::timeout(Duration::from_secs(10), conn.closed())
-            .await
-            .unwrap()
-            .to_string();
-        assert!(reason.contains("Payload"), "{reason}");
-    }
-    let took = started.elapsed();
-    assert!(
-        took < host::serve::HELLO_TIMEOUT,
-        "refused by the timeout, not from the header: {took:?}"
-    );
-    assert!(
-        grown < CLIENTS << 20,
-        "resident memory grew {} KiB for {CLIENTS} connections",
-        grown >> 10
-    );
-    // One stream per client: a second bidirectional or any unidirectional
-    // stream is never admitted.
-    let (_endpoint, conn) = raw_connection(&fx, 8).await;
-    let (mut send, _recv) = conn.open_bi().await.unwrap();
-    send.write_all(&hello_bytes()).await.unwrap();
-    let extra_bi = tokio::time::timeout(Duration::from_millis(500), conn.open_bi()).await;
-    let extra_uni = tokio::time::timeout(Duration::from_millis(500), conn.open_uni()).await;
-    assert!(
-        extra_bi.is_err() && extra_uni.is_err(),
-        "a second stream opened"
-    );
-    for (endpoint, _, _) in held {
-        endpoint.close(0u32.into(), b"");
-    }
-    every_frame_then_shut_down(fx, healthy).await;
 }
 
 /// The session cap (issue 18 §3): with room for one session, a second

@@ -1,10 +1,11 @@
 //! The loopback fixture of the QUIC tests (`transport.rs`,
-//! `video_stream.rs`): a dump, a server identity and a live server on
-//! 127.0.0.1, and helpers to replay, connect and compare. Each test binary
-//! uses a part of it.
+//! `transport_memory.rs`, `video_stream.rs`, `interactive.rs`): a dump, a
+//! server identity and a live server on 127.0.0.1, and helpers to replay,
+//! connect (raw QUIC too) and compare. Each test binary uses a part of it.
 #![allow(dead_code)]
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::time::Duration;
 
 use client::{ConnectConfig, Pin};
@@ -240,4 +241,50 @@ pub fn all_raw() -> Vec<StreamBuffer> {
         x.codec = Codec::Raw;
     }
     b
+}
+
+/// A raw QUIC connection that pins the fixture's certificate.
+pub async fn raw_connection(
+    fx: &Fixture,
+    max_streams: u32,
+) -> (quinn::Endpoint, quinn::Connection) {
+    let tls = Pin::Sha256(fx.identity.fingerprint())
+        .client_config()
+        .unwrap();
+    let crypto = quinn::crypto::rustls::QuicClientConfig::try_from(tls).unwrap();
+    let mut config = quinn::ClientConfig::new(Arc::new(crypto));
+    let mut transport = quinn::TransportConfig::default();
+    transport.max_concurrent_uni_streams(max_streams.into());
+    config.transport_config(Arc::new(transport));
+    let endpoint = quinn::Endpoint::client("127.0.0.1:0".parse().unwrap()).unwrap();
+    let conn = endpoint
+        .connect_with(config, fx.addr(), "localhost")
+        .unwrap()
+        .await
+        .unwrap();
+    (endpoint, conn)
+}
+
+pub fn hello_bytes() -> Vec<u8> {
+    protocol::wire::encode(&protocol::wire::Message::Hello(protocol::wire::Hello {
+        version: protocol::wire::WIRE_VERSION,
+        client_name: "raw".into(),
+        token: TOKEN.into(),
+        codecs: vec![Codec::Raw, Codec::Zstd],
+        max_size: FrameSize::new(8192, 8192),
+        window_modes: vec![],
+        extras: vec![],
+    }))
+    .unwrap()
+}
+
+/// Streams the fixture's dump to `session`, checks every frame arrives,
+/// then ends the session and the server.
+pub async fn every_frame_then_shut_down(fx: Fixture, mut session: client::Session) {
+    let source = fx.start_source();
+    let got = receive_all(&mut session).await;
+    assert_eq!(got.len(), FRAMES as usize);
+    source.stop();
+    session.close().await;
+    fx.server.shutdown().await;
 }
