@@ -302,10 +302,12 @@ impl Taps {
             let c = sum.clamp(lo, hi);
             return [c.x, c.y, c.z];
         }
+        // The inner two rows' depths, each read once for its two taps.
+        let inner = [depths(1), depths(2)];
         let mut sum = Vec4::ZERO;
         let mut weight = 0.0;
         for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-            if same_surface(depths(dy + 1)[dx + 1], d0) {
+            if same_surface(inner[dy][dx + 1], d0) {
                 let wx = if dx == 0 { 1.0 - f.x } else { f.x };
                 let wy = if dy == 0 { 1.0 - f.y } else { f.y };
                 sum += color(dx + 1, dy + 1) * (wx * wy);

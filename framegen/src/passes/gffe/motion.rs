@@ -19,11 +19,10 @@ use crate::passes::gffe::history::{MAX_HISTORY, chain, is_dynamic};
 /// Eq. 1 for one pixel. `planes` are `P_0..P_{k−1}` of the pixel.
 pub fn estimate_pixel(planes: &[[f32; 4]], track: u32, alpha: f32) -> [f32; 4] {
     let p0 = planes[0];
-    let m = chain(track) as usize;
-    if !is_dynamic(track) || m == 0 || m >= planes.len() || p0[3] != W_POINT {
-        return p0;
+    match moving_chain(p0, track, planes.len()) {
+        Some(m) => extrapolate(p0, planes[m], m, alpha),
+        None => p0,
     }
-    extrapolate(p0, planes[m], m, alpha)
 }
 
 /// CPU reference: next positions of every pixel. `positions` holds `k`
@@ -52,15 +51,24 @@ pub fn estimate_at(
 ) -> [f32; 4] {
     let n = track.len();
     let k = (k.max(1) as usize).min(MAX_HISTORY);
-    let (p0, word) = (positions[x], track[x]);
-    let m = chain(word) as usize;
-    if !is_dynamic(word) || m == 0 || m >= k || p0[3] != W_POINT {
-        return p0;
+    let p0 = positions[x];
+    match moving_chain(p0, track[x], k) {
+        Some(m) => extrapolate(p0, positions[m * n + x], m, alpha),
+        None => p0,
     }
-    extrapolate(p0, positions[m * n + x], m, alpha)
 }
 
-/// Eq. 1 from `P_0` and `P_m`, `m` intervals apart (both points).
+/// The chain length `m` that eq. 1 reads `P_m` at, or `None` where the pixel
+/// keeps `P_0`: static, no chain, a chain past the `k` planes held, or a
+/// `P_0` that is not a point (a sky direction or no depth).
+#[inline]
+fn moving_chain(p0: [f32; 4], track: u32, k: usize) -> Option<usize> {
+    let m = chain(track) as usize;
+    (is_dynamic(track) && m != 0 && m < k && p0[3] == W_POINT).then_some(m)
+}
+
+/// Eq. 1 from `P_0` (a point) and `P_m`, `m` intervals apart; keeps `P_0`
+/// where `P_m` is not a point.
 #[inline]
 fn extrapolate(p0: [f32; 4], pm: [f32; 4], m: usize, alpha: f32) -> [f32; 4] {
     if pm[3] != W_POINT {
