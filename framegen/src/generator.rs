@@ -506,7 +506,11 @@ pub(crate) fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
             use half::slice::HalfFloatSliceExt;
             let mut clean = [[0.0f32; 4]; crate::input::CONVERT_BLOCK];
             for (c, s) in clean.iter_mut().zip(src) {
-                let ch = |v: f32| finite(v).clamp(0.0, crate::input::MAX_RADIANCE);
+                // A select, not a branch, so the loop vectorises.
+                let ch = |v: f32| {
+                    let clamped = v.clamp(0.0, crate::input::MAX_RADIANCE);
+                    if v.is_finite() { clamped } else { 0.0 }
+                };
                 *c = [ch(s[0]), ch(s[1]), ch(s[2]), 1.0];
             }
             dst.as_flattened_mut()
@@ -517,7 +521,12 @@ pub(crate) fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
         .par_iter()
         .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
         .collect();
-    let motion = out.motion.par_iter().map(|m| m.map(finite)).collect();
+    // Element by element: `[f32; 2]::map` is not inlined here.
+    let motion = out
+        .motion
+        .par_iter()
+        .map(|m| [finite(m[0]), finite(m[1])])
+        .collect();
     let mask = out
         .mask
         .par_iter()

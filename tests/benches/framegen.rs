@@ -14,6 +14,10 @@
 //! `gffe-nearest/total` is gffe with the seed's nearest-pixel colour
 //! instead of the default resampling filter (what the filter costs).
 //!
+//! `repeat/upload`, `repeat/crop` and `repeat/readback` split the cheapest
+//! method on wgpu into its transfers and its one kernel: what a frame costs
+//! to move on and off the device against what a trivial kernel costs there.
+//!
 //! `shading` and `shade` are shading correction's estimate (per fed frame)
 //! and its application (per generated frame); a scene whose shading moves
 //! (`FRAMEGEN_BENCH_SCENE=sun_sweep`) gives them real work.
@@ -137,6 +141,10 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
                     Pass::Shade,
                     Pass::Readback,
                 ],
+            ),
+            (
+                Method::Repeat,
+                vec![Pass::Upload, Pass::Crop, Pass::Readback],
             ),
             (
                 Method::Interp,

@@ -432,11 +432,12 @@ impl Executor for CpuBackend {
             // cannot fill a hole, so they are not projected.
             let track = &cur.history.track;
             let seeded = |i: usize| track.get(i).is_some_and(|&t| background::seeds(t));
+            let layout = bgfill::Layout::new(cur.levels, job.bg_target);
             let winners = splat::resolve_with(bg.len(), slots, |i| {
                 if seeded(i) {
                     return splat::Candidate::MISS;
                 }
-                bgfill::candidate(i, &bg[i], cur.levels, &job.target, job.bg_target)
+                bgfill::candidate(i, &bg[i], &job.target, &layout)
             });
             bgfill::resolve(&winners, bg, job.bg_target, camera, job.map, out);
         });

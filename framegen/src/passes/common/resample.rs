@@ -215,7 +215,10 @@ pub fn resample(src: Source<'_>, own: usize, at: Vec2, mode: Resample) -> [f32; 
     let ys = [row(0), row(1), row(2), row(3)];
     taps.filter(
         |i, j| Vec4::from_array(src.color[ys[j] + xs[i]]),
-        |j| Vec4::from_array(xs.map(|x| src.depth[ys[j] + x])),
+        |j| {
+            let d = |i: usize| src.depth[ys[j] + xs[i]];
+            Vec4::new(d(0), d(1), d(2), d(3))
+        },
     )
 }
 
@@ -242,10 +245,12 @@ impl<'a> Window<'a> {
             let depth = src.depth.get(o..)?.first_chunk::<4>()?;
             Some((color, depth))
         };
-        let rows = [row(0)?, row(1)?, row(2)?, row(3)?];
+        // Spelled out: `[_; 4]::map` is not inlined here (it showed in
+        // profiles as `try_map`, per resampled pixel).
+        let [r0, r1, r2, r3] = [row(0)?, row(1)?, row(2)?, row(3)?];
         Some(Self {
-            color: rows.map(|r| r.0),
-            depth: rows.map(|r| r.1),
+            color: [r0.0, r1.0, r2.0, r3.0],
+            depth: [r0.1, r1.1, r2.1, r3.1],
         })
     }
 }

@@ -29,8 +29,8 @@
 use glam::Vec3;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::passes::common::camera::{PassCamera, cell, rebase};
-use crate::passes::common::levels::Levels;
+use crate::passes::common::camera::{PassCamera, rebase};
+use crate::passes::common::levels::{Grid, Levels};
 use crate::passes::common::splat::{self, Candidate, depth_key};
 use crate::passes::gffe::history::{is_confirmed, is_dynamic};
 
@@ -112,14 +112,17 @@ pub fn seeds(track: u32) -> bool {
     !is_dynamic(track) && is_confirmed(track)
 }
 
-/// The candidate of previous fragment `t` of level `l` (cases 1 and 2).
+/// The candidate of a previous fragment `t` of level `l` (cases 1 and 2):
+/// `here` is level `l` of the current pyramid, `next` level `l + 1` where
+/// there is one.
+#[inline]
 pub fn candidate(
     t: &Texel,
     shift: Vec3,
     camera: &PassCamera,
     bg: &[Texel],
-    levels: Levels,
-    l: u32,
+    here: Grid,
+    next: Option<Grid>,
     tolerance: f32,
 ) -> Candidate {
     if !t.is_valid() {
@@ -128,25 +131,24 @@ pub fn candidate(
     let Some(r) = camera.project(rebase(t.pos, shift)) else {
         return Candidate::MISS;
     };
-    let (w, h) = levels.size(l);
-    let Some(slot) = cell(r.pixel, w, h, Levels::scale(l)) else {
+    let Some(slot) = here.slot(r.pixel) else {
         return Candidate::MISS;
     };
-    let here = bg[(levels.offset(l) + slot) as usize];
-    if !here.is_valid() {
+    let held = bg[slot as usize];
+    if !held.is_valid() {
         return Candidate {
-            slot: levels.offset(l) + slot,
+            slot,
             key: depth_key(r.depth),
         };
     }
-    if l + 1 < levels.count && r.depth > camera.depth_of(here.pos) * (1.0 + tolerance) {
-        let (w1, h1) = levels.size(l + 1);
-        if let Some(s1) = cell(r.pixel, w1, h1, Levels::scale(l + 1)) {
-            return Candidate {
-                slot: levels.offset(l + 1) + s1,
-                key: depth_key(r.depth),
-            };
-        }
+    if let Some(next) = next
+        && r.depth > camera.depth_of(held.pos) * (1.0 + tolerance)
+        && let Some(slot) = next.slot(r.pixel)
+    {
+        return Candidate {
+            slot,
+            key: depth_key(r.depth),
+        };
     }
     Candidate::MISS
 }
@@ -184,8 +186,12 @@ pub fn collect(
         let source = &prev.texels[start..start + prev.levels.len(l) as usize];
         // Level l's candidates land in level l or l + 1.
         let (begin, end) = (levels.offset(l), levels.offset((l + 2).min(levels.count)));
+        let (here, next) = (
+            levels.grid(l),
+            (l + 1 < levels.count).then(|| levels.grid(l + 1)),
+        );
         let winners = splat::resolve_with(source.len(), begin as usize..end as usize, |i| {
-            candidate(&source[i], shift, camera, &bg, levels, l, tolerance)
+            candidate(&source[i], shift, camera, &bg, here, next, tolerance)
         });
         bg[begin as usize..end as usize]
             .par_iter_mut()

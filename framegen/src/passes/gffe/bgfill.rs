@@ -14,7 +14,7 @@ use glam::Vec2;
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{BACKGROUND, DisplayMap, EMPTY, Output};
 use crate::passes::common::camera::{PassCamera, cell, pixel_center};
-use crate::passes::common::levels::Levels;
+use crate::passes::common::levels::{Grid, Levels};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 use crate::passes::gffe::background::{MAX_LEVELS, Texel};
 
@@ -28,32 +28,66 @@ pub fn project(
     target: Levels,
 ) -> Vec<Candidate> {
     use rayon::prelude::*;
+    let layout = Layout::new(source, target);
     bg.par_iter()
         .enumerate()
-        .map(|(i, t)| candidate(i, t, source, camera, target))
+        .map(|(i, t)| candidate(i, t, camera, &layout))
         .collect()
+}
+
+/// Where the texels of each background level land: the ends of the
+/// background's levels and the grids of the target pyramid's, computed
+/// once per frame instead of per texel.
+#[derive(Clone, Copy, Debug)]
+pub struct Layout {
+    /// One past the last texel of each source level.
+    ends: [u32; MAX_LEVELS as usize],
+    /// The target pyramid's level of the same number.
+    grids: [Grid; MAX_LEVELS as usize],
+    /// Levels in use (at most [`MAX_LEVELS`], as the settings allow).
+    count: usize,
+}
+
+impl Layout {
+    /// The layout of a background of `source` levels projected into the
+    /// `target` pyramid.
+    pub fn new(source: Levels, target: Levels) -> Self {
+        let count = source.count.min(MAX_LEVELS);
+        let level = |l: u32| l.min(count.saturating_sub(1));
+        Self {
+            ends: [0, 1, 2, 3].map(|l| {
+                let l = level(l);
+                source.offset(l) + source.len(l)
+            }),
+            grids: [0, 1, 2, 3].map(|l| target.grid(level(l))),
+            count: count as usize,
+        }
+    }
+
+    /// The level of texel `i` with its target grid; `None` past the last
+    /// level.
+    #[inline]
+    fn level_of(&self, i: u32) -> Option<&Grid> {
+        let l = self.ends[..self.count].iter().position(|&end| i < end)?;
+        Some(&self.grids[l])
+    }
 }
 
 /// One element of [`project`]: where texel `i` of the background lands in
 /// its level of the target pyramid.
 #[inline]
-pub fn candidate(
-    i: usize,
-    t: &Texel,
-    source: Levels,
-    camera: &PassCamera,
-    target: Levels,
-) -> Candidate {
+pub fn candidate(i: usize, t: &Texel, camera: &PassCamera, layout: &Layout) -> Candidate {
     if !t.is_valid() {
         return Candidate::MISS;
     }
-    let l = source.level_of(i as u32);
-    let (w, h) = target.size(l);
+    let Some(grid) = layout.level_of(i as u32) else {
+        return Candidate::MISS;
+    };
     camera
         .project(t.pos)
         .and_then(|r| {
-            cell(r.pixel, w, h, Levels::scale(l)).map(|s| Candidate {
-                slot: target.offset(l) + s,
+            grid.slot(r.pixel).map(|slot| Candidate {
+                slot,
                 key: depth_key(r.depth),
             })
         })
@@ -234,5 +268,31 @@ impl GpuBgFill {
             ],
             u64::from(pixels),
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The per-frame layout puts every texel in the level `Levels` says,
+    /// with that level's target grid, for every level count the settings
+    /// allow and odd sizes; nothing past the last level.
+    #[test]
+    fn the_layout_finds_each_texels_level() {
+        for count in 0..=MAX_LEVELS {
+            let source = Levels::new(count, 13, 7);
+            let target = Levels::new(count, 11, 9);
+            let layout = Layout::new(source, target);
+            for i in 0..source.total() {
+                let l = source.level_of(i);
+                assert_eq!(
+                    layout.level_of(i),
+                    Some(&target.grid(l)),
+                    "count {count}, texel {i}"
+                );
+            }
+            assert_eq!(layout.level_of(source.total()), None, "count {count}");
+        }
     }
 }
