@@ -506,7 +506,7 @@ pub(crate) fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
             use half::slice::HalfFloatSliceExt;
             let mut clean = [[0.0f32; 4]; crate::input::CONVERT_BLOCK];
             for (c, s) in clean.iter_mut().zip(src) {
-                // A select, not a branch, so the loop vectorises.
+                // Non-finite values to 0, the rest clamped (a select).
                 let ch = |v: f32| {
                     let clamped = v.clamp(0.0, crate::input::MAX_RADIANCE);
                     if v.is_finite() { clamped } else { 0.0 }

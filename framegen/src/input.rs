@@ -73,7 +73,7 @@ pub fn prepare(frame: &Frame) -> Prepared {
             use half::slice::HalfFloatSliceExt;
             src.as_flattened()
                 .convert_to_f32_slice(out.as_flattened_mut());
-            // Selects, not branches, so the loop vectorises.
+            // Non-finite values to 0 and counted, the rest clamped.
             let mut bad = 0;
             for c in out.iter_mut() {
                 for v in &mut c[..3] {

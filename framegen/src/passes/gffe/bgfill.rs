@@ -55,11 +55,11 @@ impl Layout {
         let count = source.count.min(MAX_LEVELS);
         let level = |l: u32| l.min(count.saturating_sub(1));
         Self {
-            ends: [0, 1, 2, 3].map(|l| {
-                let l = level(l);
+            ends: std::array::from_fn(|l| {
+                let l = level(l as u32);
                 source.offset(l) + source.len(l)
             }),
-            grids: [0, 1, 2, 3].map(|l| target.grid(level(l))),
+            grids: std::array::from_fn(|l| target.grid(level(l as u32))),
             count: count as usize,
         }
     }
