@@ -13,7 +13,7 @@ use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{BACKGROUND, DisplayMap, EMPTY, Output};
-use crate::passes::common::camera::{PassCamera, cell, pixel_center};
+use crate::passes::common::camera::{PassCamera, pixel_center};
 use crate::passes::common::levels::{Grid, Levels};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 use crate::passes::gffe::background::{MAX_LEVELS, Texel};
@@ -106,18 +106,18 @@ pub fn resolve(
 ) {
     use rayon::prelude::*;
     let width = out.width;
+    let grids: Vec<Grid> = (0..target.count).map(|l| target.grid(l)).collect();
     out.par_pixels_mut().for_each(|(t, px)| {
         if *px.mask != EMPTY {
             return;
         }
         let center = pixel_center(t, width);
         let mut best: Option<(f32, usize)> = None;
-        for l in 0..target.count {
-            let (w, h) = target.size(l);
-            let Some(s) = cell(center, w, h, Levels::scale(l)) else {
+        for grid in &grids {
+            let Some(slot) = grid.slot(center) else {
                 continue;
             };
-            let slot = (target.offset(l) + s) as usize;
+            let slot = slot as usize;
             if let (Some(i), Some(d)) = (winners.winner(slot), winners.depth(slot))
                 && best.is_none_or(|(bd, _)| d < bd)
             {
