@@ -162,6 +162,91 @@ fn splat_winners_are_exact() {
     assert!(cpu_stored.iter().filter(|&&s| s != 0).count() > slots / 2);
 }
 
+/// Shading correction's block search (step 2): the kernel's flow equals the
+/// reference's bit for bit. The ratio plane has blocks whose change moved by
+/// even and odd displacements (exact matches), blocks on a two-pixel
+/// period (many displacements cost the same: the tie rules decide), noise
+/// (rejected as incoherent), blocks under the energy floor, and partial
+/// blocks at the right and bottom edges.
+#[test]
+fn shading_flow_is_exact() {
+    use framegen::passes::gffe::shading::{self, GpuShading, QUANTUM};
+    let ctx = ctx();
+    let (w, h) = (100u32, 60u32);
+    let mut seed = 0x2545_f491_u32;
+    let mut random = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 17;
+        seed ^= seed << 5;
+        seed
+    };
+    // A smooth field of r_{t-1} in quanta (so the even search lands next
+    // to an odd displacement), and per region the displacement its change
+    // moved by.
+    let field: Vec<i32> = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            (300.0 * (0.35 * x + 0.2 * y).sin() + 200.0 * (0.27 * y - 0.1 * x).cos()) as i32
+        })
+        .collect();
+    let at = |x: i32, y: i32| -> i32 {
+        if x < 0 || y < 0 || x >= w as i32 || y >= h as i32 {
+            0
+        } else {
+            field[(y as u32 * w + x as u32) as usize]
+        }
+    };
+    let mut ratio = vec![[0.0f32; 2]; (w * h) as usize];
+    for y in 0..h as i32 {
+        for x in 0..w as i32 {
+            let (bx, by) = (x / 8, y / 8);
+            let now = match (bx + by) % 5 {
+                // Moved by an even displacement, by an odd one.
+                0 => at(x - 4, y + 2),
+                1 => at(x + 3, y - 5),
+                // A two-pixel period: every even displacement matches.
+                2 => 200 * (((x + y) & 1) * 2 - 1),
+                // Noise the previous change does not explain.
+                3 => (random() % 401) as i32 - 200,
+                // Under the energy floor.
+                _ => i32::from(x % 7 == 0),
+            };
+            let before = if (bx + by) % 5 == 2 {
+                200 * (((x + y) & 1) * 2 - 1)
+            } else {
+                at(x, y)
+            };
+            ratio[(y as u32 * w + x as u32) as usize] =
+                [now as f32 * QUANTUM, before as f32 * QUANTUM];
+        }
+    }
+    let mut cpu = Vec::new();
+    shading::flow_into(&ratio, (w, h), &mut cpu);
+    let kernels = GpuShading::new(&ctx);
+    let rbuf = ctx.storage_init("ratio", bytemuck::cast_slice(&ratio));
+    let fbuf = ctx.storage("flow", cpu.len() as u64 * 16);
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    let pool = Pool::default();
+    kernels.encode_flow(&Rec::new(&ctx, &pool), &mut enc, &rbuf, &fbuf, (w, h));
+    ctx.queue.submit([enc.finish()]);
+    let gpu: Vec<[f32; 4]> = ctx.read_pod(&fbuf, cpu.len()).unwrap();
+    for (b, (c, g)) in cpu.iter().zip(&gpu).enumerate() {
+        assert_eq!(
+            c.map(f32::to_bits),
+            g.map(f32::to_bits),
+            "block {b}: {c:?} vs {g:?}"
+        );
+    }
+    let tracked = |f: &[f32; 4]| f[2] > 0.0;
+    let odd = cpu
+        .iter()
+        .filter(|f| tracked(f) && (f[0] as i32) % 2 != 0)
+        .count();
+    assert!(odd > 5, "{odd} blocks found an odd displacement");
+    assert!(cpu.iter().filter(|f| tracked(f)).count() > 40);
+    assert!(cpu.iter().filter(|f| !tracked(f)).count() > 40);
+}
+
 /// The warp's projection: same landing slot and depth for nearly every
 /// pixel (boundary flips bounded).
 #[test]

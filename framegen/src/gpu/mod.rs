@@ -267,7 +267,21 @@ impl Kernel {
         buffers: &[&wgpu::Buffer],
         items: u64,
     ) {
-        if items == 0 {
+        let groups = items.div_ceil(u64::from(WORKGROUP)) as u32;
+        self.dispatch_groups(gpu, encoder, buffers, groups);
+    }
+
+    /// Records a dispatch of `groups` workgroups of the entry point's own
+    /// size (folded into a 2-D grid like [`Self::dispatch`]), for kernels
+    /// that give each workgroup one item (e.g. a block of pixels).
+    pub fn dispatch_groups(
+        &self,
+        gpu: &Rec<'_>,
+        encoder: &mut wgpu::CommandEncoder,
+        buffers: &[&wgpu::Buffer],
+        groups: u32,
+    ) {
+        if groups == 0 {
             return;
         }
         assert_eq!(
@@ -284,7 +298,6 @@ impl Kernel {
             .zip(buffers.iter().copied())
             .collect();
         let group = gpu.bind_group(&self.layout, self.name, &entries);
-        let groups = items.div_ceil(u64::from(WORKGROUP)) as u32;
         let x = groups.min(MAX_GROUPS_X);
         let y = groups.div_ceil(x);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {

@@ -687,13 +687,24 @@ impl GpuShading {
             ],
             n,
         );
-        let (bw, bh) = blocks(cur.size.0, cur.size.1);
-        self.flow.dispatch(
-            ctx,
-            encoder,
-            &[&params, cur.ratio, cur.flow],
-            u64::from(bw) * u64::from(bh),
-        );
+        self.encode_flow(ctx, encoder, cur.ratio, cur.flow, cur.size);
+    }
+
+    /// Records step 2 alone: the flow of each block of the `size` ratio
+    /// plane `ratio` into `flow` (`vec4<f32>` per block), one workgroup
+    /// per block.
+    pub fn encode_flow(
+        &self,
+        ctx: &Rec<'_>,
+        encoder: &mut wgpu::CommandEncoder,
+        ratio: &wgpu::Buffer,
+        flow: &wgpu::Buffer,
+        size: (u32, u32),
+    ) {
+        let params = Self::params(ctx, size, false, 0.0);
+        let (bw, bh) = blocks(size.0, size.1);
+        self.flow
+            .dispatch_groups(ctx, encoder, &[&params, ratio, flow], bw * bh);
     }
 
     /// Records steps 3–4 at `alpha` into `out` (`vec4<f32>` per pixel).

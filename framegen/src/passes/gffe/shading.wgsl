@@ -120,87 +120,165 @@ fn shading_ratio(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups)
     sh_ratio[x] = vec2<f32>(q, aligned);
 }
 
-// Step 2's cost of displacement (dx, dy) for the block x0..x1, y0..y1:
-// sum |r_t(x) - r_{t-1}(x - d)|.
-fn sh_cost(x0: u32, y0: u32, x1: u32, y1: u32, dx: i32, dy: i32) -> f32 {
-    let w = sp.size.x;
-    let h = sp.size.y;
-    var cost = 0.0;
-    for (var y = y0; y < y1; y++) {
-        for (var x = x0; x < x1; x++) {
-            let sx = i32(x) - dx;
-            let sy = i32(y) - dy;
-            var before = 0.0;
-            if sx >= 0 && sx < i32(w) && sy >= 0 && sy < i32(h) {
-                before = sh_ratio[u32(sy) * w + u32(sx)].y;
-            }
-            cost += abs(sh_ratio[y * w + x].x - before);
+// Step 2, one workgroup per 8x8 block (`shading.rs`'s `flow_block`, the
+// reference): the block's r_t and the window of aligned r_{t-1} around it
+// are gathered once into workgroup memory, in quanta (0 outside the frame);
+// each invocation then sums one or two displacements' costs there. Sums of quanta
+// are exact integers, so the least cost, then the shortest displacement,
+// then the row order (`dy`, then `dx`) pick what the reference picks.
+
+// Farthest a displacement reaches: the even search, then the pixel around
+// its best.
+const REACH: i32 = SEARCH + 1;
+// Side of the window of r_{t-1} a block's search reads.
+const SPAN: u32 = 26u; // BLOCK + 2 * REACH
+// Even displacements per axis (-SEARCH, -SEARCH + 2, ..., SEARCH) and in all.
+const EVEN_SIDE: u32 = 9u; // SEARCH + 1
+const EVEN: u32 = 81u; // EVEN_SIDE * EVEN_SIDE
+// Invocations per block: one per pixel of the block.
+const FLOW_GROUP: u32 = 64u; // BLOCK * BLOCK
+
+var<workgroup> fl_now: array<i32, 64>; // BLOCK * BLOCK
+var<workgroup> fl_before: array<i32, 676>; // SPAN * SPAN
+var<workgroup> fl_energy: i32;
+// The least cost so far, then among its holders the least
+// `|f|^2 << 8 | order`.
+var<workgroup> fl_cost: atomic<u32>;
+var<workgroup> fl_tie: atomic<u32>;
+
+fn fl_quanta(v: f32) -> i32 {
+    return i32(floor(v / QUANTUM + 0.5));
+}
+
+// sum |r_t(x) - r_{t-1}(x - d)| in quanta over the block's `cols` x `rows`.
+fn fl_cost_of(d: vec2<i32>, cols: u32, rows: u32) -> u32 {
+    var cost = 0u;
+    for (var y = 0u; y < rows; y++) {
+        let row = u32(i32(y) + REACH - d.y) * SPAN + u32(REACH - d.x);
+        for (var x = 0u; x < cols; x++) {
+            cost += u32(abs(fl_now[y * BLOCK + x] - fl_before[row + x]));
         }
     }
     return cost;
 }
 
-// Step 2: the displacement of each block's change, [f.x, f.y, energy, 0].
-@compute @workgroup_size(256)
+// Even displacement number `i` in row order.
+fn fl_even(i: u32) -> vec2<i32> {
+    return vec2<i32>(2 * i32(i % EVEN_SIDE) - SEARCH, 2 * i32(i / EVEN_SIDE) - SEARCH);
+}
+
+// [f.x, f.y, energy, 0] per block.
+@compute @workgroup_size(64)
 fn shading_flow(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let b = thread_index(wid, nwg, lid);
+    let b = wid.y * nwg.x + wid.x;
     let w = sp.size.x;
     let h = sp.size.y;
     let bw = sp.size.z;
+    // Uniform across the workgroup: the whole group leaves together.
     if b >= bw * sp.size.w {
         return;
     }
     let x0 = (b % bw) * BLOCK;
     let y0 = (b / bw) * BLOCK;
-    let x1 = min(x0 + BLOCK, w);
-    let y1 = min(y0 + BLOCK, h);
-    var energy = 0.0;
-    for (var y = y0; y < y1; y++) {
-        for (var x = x0; x < x1; x++) {
-            energy += abs(sh_ratio[y * w + x].x);
+    let cols = min(x0 + BLOCK, w) - x0;
+    let rows = min(y0 + BLOCK, h) - y0;
+    {
+        let x = lid % BLOCK;
+        let y = lid / BLOCK;
+        var v = 0;
+        if x < cols && y < rows {
+            v = fl_quanta(sh_ratio[(y0 + y) * w + x0 + x].x);
         }
+        fl_now[lid] = v;
     }
-    if !(energy >= MIN_ENERGY) {
-        sh_flow[b] = vec4<f32>(0.0);
+    workgroupBarrier();
+    if lid == 0u {
+        var e = 0;
+        for (var i = 0u; i < BLOCK * BLOCK; i++) {
+            e += abs(fl_now[i]);
+        }
+        fl_energy = e;
+    }
+    let energy = f32(workgroupUniformLoad(&fl_energy)) * QUANTUM;
+    if energy < MIN_ENERGY {
+        if lid == 0u {
+            sh_flow[b] = vec4<f32>(0.0);
+        }
         return;
     }
-    // The least cost, then the shortest displacement; over every even
-    // displacement, then the pixel around the best.
-    var best_cost = inf_f32();
-    var best_len = 0x7fffffff;
-    var best = vec2<i32>(0, 0);
-    for (var dy = -SEARCH; dy <= SEARCH; dy += 2) {
-        for (var dx = -SEARCH; dx <= SEARCH; dx += 2) {
-            let c = sh_cost(x0, y0, x1, y1, dx, dy);
-            let len = dx * dx + dy * dy;
-            if c < best_cost || (c == best_cost && len < best_len) {
-                best_cost = c;
-                best_len = len;
-                best = vec2<i32>(dx, dy);
-            }
+    // Only a block with a change to track reads the window.
+    for (var i = lid; i < SPAN * SPAN; i += FLOW_GROUP) {
+        let sx = i32(x0) - REACH + i32(i % SPAN);
+        let sy = i32(y0) - REACH + i32(i / SPAN);
+        var v = 0;
+        if sx >= 0 && sx < i32(w) && sy >= 0 && sy < i32(h) {
+            v = fl_quanta(sh_ratio[u32(sy) * w + u32(sx)].y);
+        }
+        fl_before[i] = v;
+    }
+    if lid == 0u {
+        atomicStore(&fl_cost, 0xffffffffu);
+        atomicStore(&fl_tie, 0xffffffffu);
+    }
+    workgroupBarrier();
+    // Every even displacement: number `lid`, and `lid + FLOW_GROUP` where
+    // there is one.
+    let second = lid + FLOW_GROUP;
+    let d0 = fl_even(lid);
+    let d1 = fl_even(second);
+    let c0 = fl_cost_of(d0, cols, rows);
+    var c1 = 0xffffffffu;
+    if second < EVEN {
+        c1 = fl_cost_of(d1, cols, rows);
+    }
+    atomicMin(&fl_cost, min(c0, c1));
+    workgroupBarrier();
+    let even_best = atomicLoad(&fl_cost);
+    if c0 == even_best {
+        atomicMin(&fl_tie, (u32(d0.x * d0.x + d0.y * d0.y) << 8u) | lid);
+    }
+    if c1 == even_best {
+        atomicMin(&fl_tie, (u32(d1.x * d1.x + d1.y * d1.y) << 8u) | second);
+    }
+    workgroupBarrier();
+    let centre = fl_even(atomicLoad(&fl_tie) & 0xffu);
+    workgroupBarrier();
+    if lid == 0u {
+        atomicStore(&fl_tie, 0xffffffffu);
+    }
+    workgroupBarrier();
+    // The eight pixels around it (order 1..8 in row order); the centre
+    // (order 0) keeps its place on a tie.
+    var cost = 0xffffffffu;
+    var d = centre;
+    if lid < 8u {
+        let k = i32(lid + u32(lid >= 4u));
+        d = centre + vec2<i32>(k % 3 - 1, k / 3 - 1);
+        cost = fl_cost_of(d, cols, rows);
+        atomicMin(&fl_cost, cost);
+    }
+    workgroupBarrier();
+    let best = atomicLoad(&fl_cost);
+    if lid < 8u && cost == best {
+        atomicMin(&fl_tie, (u32(d.x * d.x + d.y * d.y) << 8u) | (lid + 1u));
+    }
+    if lid == 8u && even_best == best {
+        atomicMin(&fl_tie, u32(centre.x * centre.x + centre.y * centre.y) << 8u);
+    }
+    workgroupBarrier();
+    if lid == 0u {
+        let order = atomicLoad(&fl_tie) & 0xffu;
+        var f = centre;
+        if order > 0u {
+            let k = i32(order - 1u + u32(order > 4u));
+            f = centre + vec2<i32>(k % 3 - 1, k / 3 - 1);
+        }
+        if f32(best) * QUANTUM > COHERENCE * energy {
+            sh_flow[b] = vec4<f32>(0.0);
+        } else {
+            sh_flow[b] = vec4<f32>(f32(f.x), f32(f.y), energy, 0.0);
         }
     }
-    let centre = best;
-    for (var dy = -1; dy <= 1; dy++) {
-        for (var dx = -1; dx <= 1; dx++) {
-            if dx == 0 && dy == 0 {
-                continue;
-            }
-            let d = centre + vec2<i32>(dx, dy);
-            let c = sh_cost(x0, y0, x1, y1, d.x, d.y);
-            let len = d.x * d.x + d.y * d.y;
-            if c < best_cost || (c == best_cost && len < best_len) {
-                best_cost = c;
-                best_len = len;
-                best = d;
-            }
-        }
-    }
-    if !(best_cost <= COHERENCE * energy) {
-        sh_flow[b] = vec4<f32>(0.0);
-        return;
-    }
-    sh_flow[b] = vec4<f32>(f32(best.x), f32(best.y), energy, 0.0);
 }
 
 // r_t at pixel (sx, sy) (the floor of a position), 0 outside the frame.
