@@ -162,15 +162,14 @@ fn preferred_name() -> Option<String> {
 /// other backend as the fallback (the OpenGL backend cannot do everything
 /// Vulkan does; see [`require_format`]).
 pub fn adapter() -> Result<wgpu::Adapter, GpuError> {
-    let from_env = wgpu::InstanceDescriptor::new_without_display_handle_from_env;
     let adapter = if let Some(name) = preferred_name() {
-        by_name(&wgpu::Instance::new(from_env()), &name, None)?
+        by_name(&instance(None), &name, None)?
     } else if std::env::var_os("WGPU_BACKEND").is_some() {
-        request(&wgpu::Instance::new(from_env()), None)?
+        request(&instance(None), None)?
     } else {
         match on_backends(wgpu::Backends::VULKAN) {
             Ok(a) => a,
-            Err(_) => request(&wgpu::Instance::new(from_env()), None)?,
+            Err(_) => request(&instance(None), None)?,
         }
     };
     log_choice(&adapter);
@@ -187,9 +186,33 @@ pub fn adapter_on(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
 }
 
 fn on_backends(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
+    request(&instance(Some(backends)), None)
+}
+
+/// The process's headless instance on `backends` (`None`: as the
+/// environment says), made once and kept for the life of the process.
+///
+/// Dropping the last instance makes the Vulkan loader unload the driver,
+/// and NVIDIA's leaves thread-exit destructors behind in the threads that
+/// called into it: such a thread then jumps into unmapped code when it
+/// ends. `client run --interactive`, whose per-session renderers drop their
+/// devices before the runtime's threads end, segfaulted on exit that way on
+/// an H200 (a `tokio-rt-worker` in libc's thread exit). Kept, the driver
+/// stays loaded until the process ends.
+fn instance(backends: Option<wgpu::Backends>) -> wgpu::Instance {
+    type Made = Vec<(Option<wgpu::Backends>, wgpu::Instance)>;
+    static MADE: Mutex<Made> = Mutex::new(Vec::new());
+    let mut made = MADE.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some((_, instance)) = made.iter().find(|(b, _)| *b == backends) {
+        return instance.clone();
+    }
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-    desc.backends = backends;
-    request(&wgpu::Instance::new(desc), None)
+    if let Some(backends) = backends {
+        desc.backends = backends;
+    }
+    let instance = wgpu::Instance::new(desc);
+    made.push((backends, instance.clone()));
+    instance
 }
 
 /// The adapter for a window's surface, chosen the same way as [`adapter`]
