@@ -192,13 +192,13 @@ fn on_backends(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
 /// The process's headless instance on `backends` (`None`: as the
 /// environment says), made once and kept for the life of the process.
 ///
-/// Dropping the last instance makes the Vulkan loader unload the driver,
-/// and NVIDIA's leaves thread-exit destructors behind in the threads that
-/// called into it: such a thread then jumps into unmapped code when it
-/// ends. `client run --interactive`, whose per-session renderers drop their
-/// devices before the runtime's threads end, segfaulted on exit that way on
-/// an H200 (a `tokio-rt-worker` in libc's thread exit). Kept, the driver
-/// stays loaded until the process ends.
+/// Dropping the last instance lets the Vulkan loader unload the driver
+/// while threads that called into it may still run its thread-exit
+/// destructors. `client run --interactive`, whose per-session renderers
+/// drop their devices before the runtime's threads end, segfaulted on exit
+/// on an H200 (a `tokio-rt-worker` jumped to an unmapped address from
+/// libc's thread exit), and exits cleanly with the instances kept: the
+/// driver stays loaded until the process ends.
 fn instance(backends: Option<wgpu::Backends>) -> wgpu::Instance {
     type Made = Vec<(Option<wgpu::Backends>, wgpu::Instance)>;
     static MADE: Mutex<Made> = Mutex::new(Vec::new());
