@@ -123,7 +123,7 @@ fn shading_ratio(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups)
 // Step 2, one workgroup per 8x8 block (`shading.rs`'s `flow_block`, the
 // reference): the block's r_t and the window of aligned r_{t-1} around it
 // are gathered once into workgroup memory, in quanta (0 outside the frame);
-// each invocation then sums one or two displacements' costs there. Sums of quanta
+// the invocations then share the displacements' costs out among them. Sums of quanta
 // are exact integers, so the least cost, then the shortest displacement,
 // then the row order (`dy`, then `dx`) pick what the reference picks.
 
@@ -135,8 +135,8 @@ const SPAN: u32 = 26u; // BLOCK + 2 * REACH
 // Even displacements per axis (-SEARCH, -SEARCH + 2, ..., SEARCH) and in all.
 const EVEN_SIDE: u32 = 9u; // SEARCH + 1
 const EVEN: u32 = 81u; // EVEN_SIDE * EVEN_SIDE
-// Invocations per block: one per pixel of the block.
-const FLOW_GROUP: u32 = 64u; // BLOCK * BLOCK
+// Invocations per block (at least 9: the refinement's eight and the centre).
+const FLOW_GROUP: u32 = 32u;
 
 var<workgroup> fl_now: array<i32, 64>; // BLOCK * BLOCK
 var<workgroup> fl_before: array<i32, 676>; // SPAN * SPAN
@@ -168,7 +168,7 @@ fn fl_even(i: u32) -> vec2<i32> {
 }
 
 // [f.x, f.y, energy, 0] per block.
-@compute @workgroup_size(64)
+@compute @workgroup_size(FLOW_GROUP)
 fn shading_flow(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let b = wid.y * nwg.x + wid.x;
     let w = sp.size.x;
@@ -182,14 +182,14 @@ fn shading_flow(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) 
     let y0 = (b / bw) * BLOCK;
     let cols = min(x0 + BLOCK, w) - x0;
     let rows = min(y0 + BLOCK, h) - y0;
-    {
-        let x = lid % BLOCK;
-        let y = lid / BLOCK;
+    for (var i = lid; i < BLOCK * BLOCK; i += FLOW_GROUP) {
+        let x = i % BLOCK;
+        let y = i / BLOCK;
         var v = 0;
         if x < cols && y < rows {
             v = fl_quanta(sh_ratio[(y0 + y) * w + x0 + x].x);
         }
-        fl_now[lid] = v;
+        fl_now[i] = v;
     }
     workgroupBarrier();
     if lid == 0u {
@@ -221,24 +221,24 @@ fn shading_flow(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) 
         atomicStore(&fl_tie, 0xffffffffu);
     }
     workgroupBarrier();
-    // Every even displacement: number `lid`, and `lid + FLOW_GROUP` where
-    // there is one.
-    let second = lid + FLOW_GROUP;
-    let d0 = fl_even(lid);
-    let d1 = fl_even(second);
-    let c0 = fl_cost_of(d0, cols, rows);
-    var c1 = 0xffffffffu;
-    if second < EVEN {
-        c1 = fl_cost_of(d1, cols, rows);
+    // Every even displacement, FLOW_GROUP apart; each invocation keeps its
+    // least (cost, |f|^2 << 8 | order), and the workgroup the least of those.
+    var cost = 0xffffffffu;
+    var key = 0xffffffffu;
+    for (var i = lid; i < EVEN; i += FLOW_GROUP) {
+        let d = fl_even(i);
+        let c = fl_cost_of(d, cols, rows);
+        let k = (u32(d.x * d.x + d.y * d.y) << 8u) | i;
+        if c < cost || (c == cost && k < key) {
+            cost = c;
+            key = k;
+        }
     }
-    atomicMin(&fl_cost, min(c0, c1));
+    atomicMin(&fl_cost, cost);
     workgroupBarrier();
     let even_best = atomicLoad(&fl_cost);
-    if c0 == even_best {
-        atomicMin(&fl_tie, (u32(d0.x * d0.x + d0.y * d0.y) << 8u) | lid);
-    }
-    if c1 == even_best {
-        atomicMin(&fl_tie, (u32(d1.x * d1.x + d1.y * d1.y) << 8u) | second);
+    if cost == even_best {
+        atomicMin(&fl_tie, key);
     }
     workgroupBarrier();
     let centre = fl_even(atomicLoad(&fl_tie) & 0xffu);
@@ -249,7 +249,7 @@ fn shading_flow(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) 
     workgroupBarrier();
     // The eight pixels around it (order 1..8 in row order); the centre
     // (order 0) keeps its place on a tie.
-    var cost = 0xffffffffu;
+    cost = 0xffffffffu;
     var d = centre;
     if lid < 8u {
         let k = i32(lid + u32(lid >= 4u));
