@@ -123,23 +123,24 @@ fn shading_ratio(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups)
 // Step 2, one workgroup per 8x8 block (`shading.rs`'s `flow_block`, the
 // reference): the block's r_t and the window of aligned r_{t-1} around it
 // are gathered once into workgroup memory, in quanta (0 outside the frame);
-// the invocations then share the displacements' costs out among them. Sums of quanta
-// are exact integers, so the least cost, then the shortest displacement,
-// then the row order (`dy`, then `dx`) pick what the reference picks.
+// the invocations then share the displacements' costs out among them. Sums
+// of quanta are exact integers, so the least cost, then the shortest
+// displacement, then the row order (`dy`, then `dx`) pick what the
+// reference picks.
 
 // Farthest a displacement reaches: the even search, then the pixel around
 // its best.
 const REACH: i32 = SEARCH + 1;
 // Side of the window of r_{t-1} a block's search reads.
-const SPAN: u32 = 26u; // BLOCK + 2 * REACH
+const SPAN: u32 = BLOCK + 2u * u32(REACH);
 // Even displacements per axis (-SEARCH, -SEARCH + 2, ..., SEARCH) and in all.
-const EVEN_SIDE: u32 = 9u; // SEARCH + 1
-const EVEN: u32 = 81u; // EVEN_SIDE * EVEN_SIDE
+const EVEN_SIDE: u32 = u32(SEARCH) + 1u;
+const EVEN: u32 = EVEN_SIDE * EVEN_SIDE;
 // Invocations per block (at least 9: the refinement's eight and the centre).
 const FLOW_GROUP: u32 = 32u;
 
-var<workgroup> fl_now: array<i32, 64>; // BLOCK * BLOCK
-var<workgroup> fl_before: array<i32, 676>; // SPAN * SPAN
+var<workgroup> fl_now: array<i32, BLOCK * BLOCK>;
+var<workgroup> fl_before: array<i32, SPAN * SPAN>;
 var<workgroup> fl_energy: i32;
 // The least cost so far, then among its holders the least
 // `|f|^2 << 8 | order`.
