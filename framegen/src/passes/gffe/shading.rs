@@ -265,9 +265,9 @@ pub fn ratio_into(
 }
 
 /// A ratio in [`QUANTUM`]s. Ratios are whole multiples of it within
-/// ±[`MAX_LOG_RATIO`], so this is exact, and so are sums of a block's
-/// worth of them in `f32` (the WGSL kernel's sums): the integer search
-/// below finds what the kernel finds, bit for bit.
+/// ±[`MAX_LOG_RATIO`], so this is exact (the WGSL kernel's `fl_quanta`
+/// does the same), and the integer search below finds what the kernel
+/// finds, bit for bit.
 #[inline]
 fn quanta(v: f32) -> i32 {
     // By the cast `floor`, not `round` (a call on this target): the same
@@ -866,7 +866,7 @@ mod tests {
     }
 
     /// The search as first written: every displacement's cost in full,
-    /// in `f32`, over the frame (the kernel's way).
+    /// in `f32`, over the frame (what the first kernel did).
     fn exhaustive(b: usize, ratio: &[[f32; 2]], size: (u32, u32)) -> [f32; 4] {
         let (w, h) = size;
         let (bw, _) = blocks(w, h);
