@@ -162,14 +162,24 @@ fn preferred_name() -> Option<String> {
 /// other backend as the fallback (the OpenGL backend cannot do everything
 /// Vulkan does; see [`require_format`]).
 pub fn adapter() -> Result<wgpu::Adapter, GpuError> {
+    let from_env = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
     let adapter = if let Some(name) = preferred_name() {
-        by_name(&instance(None), &name, None)?
+        // The kept instance's adapters, then OpenGL's from a new one.
+        let (gl, kept) = (wgpu::Backends::GL, from_env - wgpu::Backends::GL);
+        let mut adapters = Vec::new();
+        if !kept.is_empty() {
+            adapters = enumerate(&instance(kept), kept);
+        }
+        if from_env.contains(gl) {
+            adapters.extend(enumerate(&instance(gl), gl));
+        }
+        by_name(adapters, &name, None)?
     } else if std::env::var_os("WGPU_BACKEND").is_some() {
-        request(&instance(None), None)?
+        request(&instance(from_env), None)?
     } else {
         match on_backends(wgpu::Backends::VULKAN) {
             Ok(a) => a,
-            Err(_) => request(&instance(None), None)?,
+            Err(_) => request(&instance(from_env), None)?,
         }
     };
     log_choice(&adapter);
@@ -186,11 +196,11 @@ pub fn adapter_on(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
 }
 
 fn on_backends(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
-    request(&instance(Some(backends)), None)
+    request(&instance(backends), None)
 }
 
-/// The process's headless instance on `backends` (`None`: as the
-/// environment says), made once and kept for the life of the process.
+/// A headless instance on `backends`: without OpenGL, the process's one,
+/// made once and kept for the life of the process; with it, a new one.
 ///
 /// Dropping the last instance lets the Vulkan loader unload the driver
 /// while threads that called into it may still run its thread-exit
@@ -198,21 +208,34 @@ fn on_backends(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
 /// drop their devices before the runtime's threads end, segfaulted on exit
 /// on an H200 (a `tokio-rt-worker` jumped to an unmapped address from
 /// libc's thread exit), and exits cleanly with the instances kept: the
-/// driver stays loaded until the process ends.
-fn instance(backends: Option<wgpu::Backends>) -> wgpu::Instance {
-    type Made = Vec<(Option<wgpu::Backends>, wgpu::Instance)>;
-    static MADE: Mutex<Made> = Mutex::new(Vec::new());
-    let mut made = MADE.lock().unwrap_or_else(|p| p.into_inner());
-    if let Some((_, instance)) = made.iter().find(|(b, _)| *b == backends) {
+/// driver stays loaded until the process ends. An OpenGL instance is not
+/// shared: its EGL context is made current by each adapter request, and a
+/// second request on the same instance while a device of the first uses
+/// the context on another thread fails inside wgpu with `BadAccess` (a
+/// panic; seen with the in-process server's renderer beside the
+/// generator).
+fn instance(backends: wgpu::Backends) -> wgpu::Instance {
+    let new = || {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        desc.backends = backends;
+        wgpu::Instance::new(desc)
+    };
+    if backends.contains(wgpu::Backends::GL) {
+        return new();
+    }
+    static KEPT: Mutex<Vec<(wgpu::Backends, wgpu::Instance)>> = Mutex::new(Vec::new());
+    let mut kept = KEPT.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some((_, instance)) = kept.iter().find(|(b, _)| *b == backends) {
         return instance.clone();
     }
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-    if let Some(backends) = backends {
-        desc.backends = backends;
-    }
-    let instance = wgpu::Instance::new(desc);
-    made.push((backends, instance.clone()));
+    let instance = new();
+    kept.push((backends, instance.clone()));
     instance
+}
+
+/// The adapters of `instance` on `backends`.
+fn enumerate(instance: &wgpu::Instance, backends: wgpu::Backends) -> Vec<wgpu::Adapter> {
+    pollster::block_on(instance.enumerate_adapters(backends))
 }
 
 /// The adapter for a window's surface, chosen the same way as [`adapter`]
@@ -222,7 +245,10 @@ pub fn adapter_for_surface(
     surface: &wgpu::Surface<'_>,
 ) -> Result<wgpu::Adapter, GpuError> {
     let adapter = match preferred_name() {
-        Some(name) => by_name(instance, &name, Some(surface))?,
+        Some(name) => {
+            let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+            by_name(enumerate(instance, backends), &name, Some(surface))?
+        }
         None => request(instance, Some(surface))?,
     };
     log_choice(&adapter);
@@ -245,13 +271,13 @@ fn request(
     })
 }
 
+/// The first of `adapters` whose name contains `name` (case-insensitive)
+/// and that can present to `surface` when one is given.
 fn by_name(
-    instance: &wgpu::Instance,
+    adapters: Vec<wgpu::Adapter>,
     name: &str,
     surface: Option<&wgpu::Surface<'_>>,
 ) -> Result<wgpu::Adapter, GpuError> {
-    let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-    let adapters = pollster::block_on(instance.enumerate_adapters(backends));
     let wanted = name.to_lowercase();
     let found = adapters
         .iter()
