@@ -4,6 +4,8 @@
 //! * [`reconnect`]: a stream that reconnects when its server goes away;
 //! * [`impair`]: a lossy, jittery relay for tests and demos;
 //! * [`present`]: the presentation loop, headless or into [`window`];
+//! * [`frame_writer`]: writes the presented frames (a dump, PNGs) off the
+//!   presenting thread;
 //! * [`latch`]: when late input takes the viewer's pose, and what
 //!   becomes of an image that missed its vsync;
 //! * [`eval`]: `client eval`, quality against milliseconds for every
@@ -16,6 +18,7 @@
 pub mod connect;
 pub mod demo;
 pub mod eval;
+pub mod frame_writer;
 pub mod impair;
 pub mod latch;
 pub mod present;

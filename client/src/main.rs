@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::{Args, Parser, Subcommand};
+use client::frame_writer::{DumpSink, FrameWriter};
 use client::impair::{Impairment, Relay};
 use client::present::{PresentConfig, ViewerSource, run_headless};
 use client::{ConnectConfig, Pin};
@@ -429,11 +430,16 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
             w.window_mode,
             w.effects
         );
+        // Written off the receiving loop: a slow disk must not make the
+        // receiver supersede frames.
         let mut writer = match &dump_to {
-            Some(dir) => Some(DumpWriter::create(
-                dir,
-                Manifest::new(w.fps, w.size, format!("client connect {addr}"))
-                    .with_effects(w.effects),
+            Some(dir) => Some(FrameWriter::start(
+                vec![Box::new(DumpSink(DumpWriter::create(
+                    dir,
+                    Manifest::new(w.fps, w.size, format!("client connect {addr}"))
+                        .with_effects(w.effects),
+                )?))],
+                FrameWriter::capacity_for(w.size),
             )?),
             None => None,
         };
@@ -451,7 +457,7 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
             };
             count += 1;
             if let Some(w) = writer.as_mut() {
-                w.write_frame(&frame)?;
+                w.write(frame)?;
             }
             if count % 30 == 0 {
                 let s = session.stats().session;
@@ -488,8 +494,8 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
             s.server.map_or(0, |x| x.frames_dropped),
         );
         if let Some(w) = writer {
-            let m = w.finish()?;
-            println!("wrote {} frames to {}", m.frame_count, dump_to.unwrap_or_default().display());
+            w.finish()?;
+            println!("wrote {count} frames to {}", dump_to.unwrap_or_default().display());
         }
         session.close().await;
         report_relay(relay.as_ref());

@@ -6,7 +6,8 @@
 //! at the display rate. "Present" is the first vsync at or after the slot's
 //! image was finished (submitted); each slot is decided at its vsync and
 //! shown at the next one, as a swap chain with one frame of queue would.
-//! Presented frames can be written as display-encoded PNGs.
+//! Presented frames can be written as display-encoded PNGs and as a dump,
+//! on a thread of their own ([`crate::frame_writer`]).
 //!
 //! Times are from the moment the first frame was pushed (kernels compiled,
 //! stream running). Per rendered frame: received (its last byte taken from
@@ -34,6 +35,7 @@ use protocol::wire::{Input, InputEcho};
 use protocol::{Frame, Pose};
 use serde::Serialize;
 
+use crate::frame_writer::{DumpSink, FrameSink, FrameWriter, PngSink};
 use crate::latch::LateLatch;
 use crate::reconnect::{Stream, StreamStats};
 use crate::viewer::{InputTrack, LiveViewer, angle_deg};
@@ -272,12 +274,10 @@ pub async fn run_headless(
         (Some(ctx), false) => FrameGenerator::gpu(settings, ctx.clone())?,
         _ => FrameGenerator::cpu(settings)?,
     };
-    if let Some(dir) = &config.png_dir {
-        std::fs::create_dir_all(dir)?;
-    }
     let display_fps = 1.0 / schedule.display_interval.as_secs_f64();
-    let mut dump = match &config.dump_dir {
-        Some(dir) => Some(protocol::dump::DumpWriter::create(
+    let mut sinks: Vec<Box<dyn FrameSink>> = Vec::new();
+    if let Some(dir) = &config.dump_dir {
+        sinks.push(Box::new(DumpSink(protocol::dump::DumpWriter::create(
             dir,
             protocol::dump::Manifest::new(
                 display_fps,
@@ -285,8 +285,17 @@ pub async fn run_headless(
                 format!("client presented frames ({})", config.method),
             )
             .with_effects(session.welcome.effects),
+        )?)));
+    }
+    if let Some(dir) = &config.png_dir {
+        sinks.push(Box::new(PngSink::create(dir)?));
+    }
+    let mut writer = match sinks.is_empty() {
+        true => None,
+        false => Some(FrameWriter::start(
+            sinks,
+            FrameWriter::capacity_for(session.welcome.size),
         )?),
-        None => None,
     };
     let mut scheduler = Scheduler::new(schedule);
     // A slot is prepared after its vsync and shown at the next one at the
@@ -464,15 +473,12 @@ pub async fn run_headless(
                         at: Duration::from_micros(e.client_time_us),
                     }),
             };
-            if let (Some(dir), Some(image)) = (&config.png_dir, &image) {
-                write_png(dir, slot.display_id, image)?;
-            }
-            if let (Some(writer), Some(image)) = (dump.as_mut(), &image) {
-                // A dump's frames are numbered by display id.
+            if let (Some(writer), Some(image)) = (writer.as_mut(), &image) {
+                // A presented sequence is numbered by display id, uncut.
                 let mut shown = image.clone();
                 shown.meta.index = slot.display_id;
                 shown.meta.cut = false;
-                writer.write_frame(&shown)?;
+                writer.write(shown)?;
             }
             if let (Some(sink), Some(image)) = (&config.window, &image) {
                 let link = session.stats().session;
@@ -530,7 +536,7 @@ pub async fn run_headless(
         missed += next.min(last + 1) - k - 1;
         k = next;
     }
-    if let Some(writer) = dump {
+    if let Some(writer) = writer {
         writer.finish()?;
     }
     let summary = accounting.summary(scheduler.drops());
@@ -715,20 +721,6 @@ fn produce(
     passes.clear();
     passes.extend(generator.timings().iter().map(|p| p.pass));
     Ok((Some(g.frame), Some(start.elapsed())))
-}
-
-fn write_png(dir: &std::path::Path, id: u64, frame: &Frame) -> anyhow::Result<()> {
-    let size = frame.meta.size;
-    let image = framegen::display_encode(size.width, size.height, &frame.color)
-        .ok_or_else(|| anyhow::anyhow!("frame buffers do not match its size"))?;
-    image::save_buffer(
-        dir.join(format!("{id:06}.png")),
-        &image.to_rgb8(),
-        size.width,
-        size.height,
-        image::ExtendedColorType::Rgb8,
-    )?;
-    Ok(())
 }
 
 /// The overlay text (in the spirit of Moonlight's statistics overlay).
