@@ -192,6 +192,32 @@ struct Caps<'a> {
     counters: &'a ServerCounters,
 }
 
+/// Sends `reject` on the control stream, lets it reach the client, then
+/// closes the connection with `code`; the error is what the session
+/// failed with.
+async fn refuse(
+    conn: &quinn::Connection,
+    send: &mut quinn::SendStream,
+    reject: wire::Reject,
+    code: u32,
+) -> anyhow::Error {
+    let what = anyhow::anyhow!("refused {:?}: {}", reject.reason, reject.message);
+    let sent = async {
+        send.write_all(&wire::encode(&Message::Reject(reject.clone()))?)
+            .await?;
+        send.finish()?;
+        // Let the refusal reach the client before closing.
+        let _ = tokio::time::timeout(Duration::from_secs(1), send.stopped()).await;
+        anyhow::Ok(())
+    };
+    let sent = sent.await;
+    conn.close(code.into(), reject.message.as_bytes());
+    match sent {
+        Ok(()) => what,
+        Err(e) => what.context(format!("the refusal was not sent: {e:#}")),
+    }
+}
+
 /// Reads one message from a stream with a decoder, within `limits`.
 async fn read_message(
     recv: &mut quinn::RecvStream,
@@ -265,22 +291,18 @@ async fn connection(
                 }
                 _ => wire::RejectReason::BadRequest,
             };
-            let reject = Message::Reject(wire::Reject {
-                reason: code,
-                message: reason.clone(),
-            });
-            let _ = send.write_all(&wire::encode(&reject)?).await;
-            let _ = send.finish();
-            let _ = tokio::time::timeout(Duration::from_secs(1), send.stopped()).await;
-            conn.close(close_code::PROTOCOL.into(), reason.as_bytes());
-            anyhow::bail!(reason);
+            let reject = wire::Reject::new(code, reason);
+            return Err(refuse(&conn, &mut send, reject, close_code::PROTOCOL).await);
         }
     };
     // An authenticated client beyond the session cap is told so.
     let admitted = session::answer(policy, &hello, session_id).and_then(|w| {
-        let slot = sessions.try_acquire_owned().map_err(|_| wire::Reject {
-            reason: wire::RejectReason::ServerFull,
-            message: format!("the server serves {} sessions at most", policy.max_sessions),
+        let slot = sessions.try_acquire_owned().map_err(|_| {
+            let most = policy.max_sessions;
+            wire::Reject::new(
+                wire::RejectReason::ServerFull,
+                format!("the server serves {most} sessions at most"),
+            )
         })?;
         Ok((w, slot))
     });
@@ -288,26 +310,32 @@ async fn connection(
         Ok(w) => w,
         Err(reject) => {
             counters.refused.fetch_add(1, Ordering::Relaxed);
-            send.write_all(&wire::encode(&Message::Reject(reject.clone()))?)
-                .await?;
-            send.finish()?;
-            // Let the refusal reach the client before closing.
-            let _ = tokio::time::timeout(Duration::from_secs(1), send.stopped()).await;
-            conn.close(close_code::REJECTED.into(), reject.message.as_bytes());
-            anyhow::bail!("refused {:?}: {}", reject.reason, reject.message);
+            return Err(refuse(&conn, &mut send, reject, close_code::REJECTED).await);
         }
     };
-    counters.sessions.fetch_add(1, Ordering::Relaxed);
-    tracing::info!(session_id, client = %hello.client_name, "session started");
     // Subscribed before the welcome, so a live stream loses nothing after
     // it; a per-session source starts here and stops with the session.
     // A per-session source opens its dump and starts its (paused)
     // producer thread off the runtime, and is stopped and joined off it at
-    // the end.
+    // the end. One that cannot start (an interactive renderer without a
+    // usable GPU) is a refusal with the reason, not a bare close.
     let subscription = {
         let feed = feed.clone();
-        tokio::task::spawn_blocking(move || feed.subscribe()).await??
+        tokio::task::spawn_blocking(move || feed.subscribe()).await?
     };
+    let subscription = match subscription {
+        Ok(s) => s,
+        Err(e) => {
+            counters.refused.fetch_add(1, Ordering::Relaxed);
+            let reject = wire::Reject::new(
+                wire::RejectReason::Unavailable,
+                format!("the server could not start this session's stream: {e:#}"),
+            );
+            return Err(refuse(&conn, &mut send, reject, close_code::REJECTED).await);
+        }
+    };
+    counters.sessions.fetch_add(1, Ordering::Relaxed);
+    tracing::info!(session_id, client = %hello.client_name, "session started");
     let (mut rx, keyframes, viewer) = (
         subscription.frames,
         subscription.keyframes,

@@ -339,3 +339,18 @@ fn window_modes_parse_from_their_names() -> Result<(), UnknownWindowMode> {
     );
     Ok(())
 }
+
+#[test]
+fn a_long_reject_message_is_cut_to_a_valid_one_at_a_character_boundary() {
+    // 'é' is two bytes: a cut at MAX_TEXT would split one.
+    let long = format!("x{}", "é".repeat(MAX_TEXT));
+    let r = Reject::new(RejectReason::Unavailable, long.clone());
+    assert_eq!(r.message.len(), MAX_TEXT - 1);
+    assert!(long.starts_with(&r.message));
+    let msg = Message::Reject(r);
+    assert!(msg.validate(&Limits::default()).is_ok());
+    let (back, _) = decode_message(&encode(&msg).unwrap(), &Limits::default()).unwrap();
+    assert_eq!(back, msg);
+    let short = Reject::new(RejectReason::BadToken, "no");
+    assert_eq!(short.message, "no");
+}

@@ -319,6 +319,30 @@ async fn a_dump_replays_from_the_start_for_every_session() {
     fx.server.shutdown().await;
 }
 
+/// A per-session source that cannot start (its dump is gone) is a refusal
+/// with the reason, `Unavailable`, not a bare close; the server serves the
+/// next client once the dump is back.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_session_whose_stream_cannot_start_is_refused_with_the_reason() {
+    let fx = fixture(StreamBuffer::default_set(Codec::Zstd).to_vec()).await;
+    let (replay, config) = fx.replay_server(fx.buffers.clone().into());
+    let away = fx.dump.with_extension("away");
+    std::fs::rename(&fx.dump, &away).unwrap();
+    match client::connect(config.clone()).await {
+        Err(ConnectError::Rejected(r)) => {
+            assert_eq!(r.reason, RejectReason::Unavailable);
+            assert!(r.message.contains("could not start"), "{}", r.message);
+        }
+        other => panic!("expected a refusal, got {:?}", other.map(|_| ())),
+    }
+    std::fs::rename(&away, &fx.dump).unwrap();
+    let mut s = client::connect(config).await.unwrap();
+    assert_eq!(receive_all(&mut s).await.len(), fx.originals().len());
+    s.close().await;
+    replay.shutdown().await;
+    fx.server.shutdown().await;
+}
+
 /// The session cap (issue 18 §3): with room for one session, a second
 /// authenticated client is refused with `ServerFull`; once the first has
 /// left, a new one is served. Every client goes through QUIC address

@@ -136,6 +136,10 @@ pub enum RejectReason {
     ShuttingDown,
     /// The hello was malformed.
     BadRequest,
+    /// The client was admitted but the server could not start its stream
+    /// (an interactive session's renderer without a usable GPU, say); the
+    /// message says why.
+    Unavailable,
 }
 
 /// A refusal, server → client, followed by closing the connection.
@@ -145,6 +149,22 @@ pub struct Reject {
     pub reason: RejectReason,
     /// Human-readable detail.
     pub message: String,
+}
+
+impl Reject {
+    /// A refusal whose message is cut to [`MAX_TEXT`] bytes (at a
+    /// character boundary), so that it always passes validation.
+    pub fn new(reason: RejectReason, message: impl Into<String>) -> Self {
+        let mut message = message.into();
+        if message.len() > MAX_TEXT {
+            let mut end = MAX_TEXT;
+            while !message.is_char_boundary(end) {
+                end -= 1;
+            }
+            message.truncate(end);
+        }
+        Self { reason, message }
+    }
 }
 
 /// First message of a per-frame stream: metadata and the buffers that follow.

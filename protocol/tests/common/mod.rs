@@ -146,6 +146,7 @@ pub fn message() -> impl Strategy<Value = Message> {
         Just(RejectReason::ServerFull),
         Just(RejectReason::ShuttingDown),
         Just(RejectReason::BadRequest),
+        Just(RejectReason::Unavailable),
     ];
     prop_oneof![
         (
