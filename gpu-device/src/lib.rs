@@ -175,11 +175,11 @@ pub fn adapter() -> Result<wgpu::Adapter, GpuError> {
         }
         by_name(adapters, &name, None)?
     } else if std::env::var_os("WGPU_BACKEND").is_some() {
-        request(&instance(from_env), None)?
+        on_backends(from_env)?
     } else {
         match on_backends(wgpu::Backends::VULKAN) {
             Ok(a) => a,
-            Err(_) => request(&instance(from_env), None)?,
+            Err(_) => on_backends(from_env)?,
         }
     };
     log_choice(&adapter);
@@ -195,7 +195,19 @@ pub fn adapter_on(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
     Ok(adapter)
 }
 
+/// The preferred adapter among `backends`. A set of OpenGL and others
+/// (`WGPU_BACKEND=vulkan,gl`, or every backend after Vulkan found none) is
+/// tried in two: the others on the kept instance first, then OpenGL on a
+/// new one, so that a Vulkan device never comes from an instance that is
+/// dropped (see [`instance`]).
 fn on_backends(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
+    let (gl, rest) = (wgpu::Backends::GL, backends - wgpu::Backends::GL);
+    if backends.contains(gl) && !rest.is_empty() {
+        if let Ok(adapter) = request(&instance(rest), None) {
+            return Ok(adapter);
+        }
+        return request(&instance(gl), None);
+    }
     request(&instance(backends), None)
 }
 
