@@ -473,13 +473,6 @@ pub async fn run_headless(
                         at: Duration::from_micros(e.client_time_us),
                     }),
             };
-            if let (Some(writer), Some(image)) = (writer.as_mut(), &image) {
-                // A presented sequence is numbered by display id, uncut.
-                let mut shown = image.clone();
-                shown.meta.index = slot.display_id;
-                shown.meta.cut = false;
-                writer.write(shown)?;
-            }
             if let (Some(sink), Some(image)) = (&config.window, &image) {
                 let link = session.stats().session;
                 let mut stats = overlay(
@@ -529,6 +522,14 @@ pub async fn run_headless(
             {
                 let at_present = track.pose_at(&start_pose, present_at.as_secs_f64());
                 view_error_deg.push(angle_deg(&image.meta.camera.pose, &at_present));
+            }
+            // Handed over last, when nothing here reads it any more: moved,
+            // not copied.
+            if let (Some(writer), Some(mut shown)) = (writer.as_mut(), image) {
+                // A presented sequence is numbered by display id, uncut.
+                shown.meta.index = slot.display_id;
+                shown.meta.cut = false;
+                writer.write(shown)?;
             }
         }
         // Skip vsyncs that passed while this slot was prepared.
