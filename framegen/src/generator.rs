@@ -18,43 +18,18 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use glam::Vec2;
-use half::f16;
 use protocol::{Camera, Frame, FrameMeta, FrameSize, Limits, Pose, Window};
 
 use crate::FramegenError;
 use crate::gpu::GpuContext;
 use crate::input::{Sanitized, prepare};
-use crate::output::{self, DisplayMap, Output};
+use crate::output::{DisplayMap, Output, PixelSource};
 use crate::passes::common::camera::PassCamera;
 use crate::passes::common::crop::Crop;
 use crate::passes::common::levels::Levels;
+use crate::passes::common::pack::Packed;
 use crate::pipeline::{Backend, IngestPlan, Job, PassTime, Snapshot};
 use crate::settings::Settings;
-
-/// Where a generated pixel came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum PixelSource {
-    /// Forward-warped from the rendered frame.
-    Warped = 1,
-    /// From the background layers.
-    Background = 2,
-    /// Push-pull filled (no source had it).
-    Filled = 3,
-    /// Copied from the rendered frame (repeat).
-    Copied = 4,
-}
-
-impl PixelSource {
-    fn from_mask(m: u32) -> Self {
-        match m {
-            output::WARPED | output::CRACK => PixelSource::Warped,
-            output::BACKGROUND => PixelSource::Background,
-            output::COPIED => PixelSource::Copied,
-            _ => PixelSource::Filled,
-        }
-    }
-}
 
 /// Where the camera of a generated frame comes from (DESIGN §4 step 3).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -77,8 +52,10 @@ pub struct Generated {
     pub alpha: f64,
     /// Per pixel, where it came from.
     pub mask: Vec<PixelSource>,
-    /// The same buffers in `f32`, as the passes left them.
-    pub output: Output,
+    /// The same buffers in `f32`, as the passes left them, where the
+    /// backend has them on the host (the CPU reference; the wgpu backend
+    /// packs on the device and reads back only the packed frame).
+    pub output: Option<Output>,
 }
 
 impl Generated {
@@ -461,8 +438,8 @@ impl FrameGenerator {
             host_processing: Duration::ZERO,
             cut: false,
         };
-        let out = self.backend.generate(&job)?;
-        Ok(finish(meta, alpha, out))
+        let (packed, output) = self.backend.generate_packed(&job)?;
+        Ok(assemble(meta, alpha, packed, output))
     }
 }
 
@@ -490,59 +467,31 @@ fn displayed_region(meta: &FrameMeta, display_size: Option<(u32, u32)>) -> ((u32
     (display, crop)
 }
 
-/// Turns the passes' output into a [`Generated`].
+/// Turns the passes' output into a [`Generated`] (the CPU reference's
+/// packing; the f32 output is kept).
 pub(crate) fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
-    use rayon::prelude::*;
-    let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
-    // In blocks: sanitised on the stack, then converted with the CPU's f16
-    // instructions in one call (`half`'s slice conversion, rounding to
-    // nearest like `f16::from_f32`).
-    let block = crate::input::CONVERT_BLOCK;
-    let mut color = crate::par::filled([f16::ZERO; 4], out.color.len());
-    color
-        .par_chunks_mut(block)
-        .zip(out.color.par_chunks(block))
-        .for_each(|(dst, src)| {
-            use half::slice::HalfFloatSliceExt;
-            let mut clean = [[0.0f32; 4]; crate::input::CONVERT_BLOCK];
-            for (c, s) in clean.iter_mut().zip(src) {
-                // Non-finite values to 0, the rest clamped (a select).
-                let ch = |v: f32| {
-                    let clamped = v.clamp(0.0, crate::input::MAX_RADIANCE);
-                    if v.is_finite() { clamped } else { 0.0 }
-                };
-                *c = [ch(s[0]), ch(s[1]), ch(s[2]), 1.0];
-            }
-            dst.as_flattened_mut()
-                .convert_from_f32_slice(clean[..src.len()].as_flattened());
-        });
-    let depth = out
-        .depth
-        .par_iter()
-        .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
-        .collect();
-    // Element by element: `[f32; 2]::map` is not inlined here.
-    let motion = out
-        .motion
-        .par_iter()
-        .map(|m| [finite(m[0]), finite(m[1])])
-        .collect();
-    let mask = out
-        .mask
-        .par_iter()
-        .map(|&m| PixelSource::from_mask(m))
-        .collect();
+    let packed = crate::passes::common::pack::pack(&out);
+    assemble(meta, alpha, packed, Some(out))
+}
+
+/// A [`Generated`] of packed buffers.
+pub(crate) fn assemble(
+    meta: FrameMeta,
+    alpha: f64,
+    packed: Packed,
+    output: Option<Output>,
+) -> Generated {
     let frame = Frame {
         meta,
-        color,
-        depth,
-        motion,
+        color: packed.color,
+        depth: packed.depth,
+        motion: packed.motion,
         extras: Vec::new(),
     };
     Generated {
         frame,
         alpha,
-        mask,
-        output: out,
+        mask: packed.mask,
+        output,
     }
 }

@@ -18,6 +18,33 @@ pub const COPIED: u32 = 4;
 /// neighbours (reported as warped).
 pub const CRACK: u32 = 5;
 
+/// Where a generated pixel came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum PixelSource {
+    /// Forward-warped from the rendered frame.
+    Warped = 1,
+    /// From the background layers.
+    Background = 2,
+    /// Push-pull filled (no source had it).
+    Filled = 3,
+    /// Copied from the rendered frame (repeat).
+    Copied = 4,
+}
+
+impl PixelSource {
+    /// The source a pass's mask value reports ([`CRACK`] as warped, an
+    /// unknown value as filled).
+    pub fn from_mask(m: u32) -> Self {
+        match m {
+            WARPED | CRACK => PixelSource::Warped,
+            BACKGROUND => PixelSource::Background,
+            COPIED => PixelSource::Copied,
+            _ => PixelSource::Filled,
+        }
+    }
+}
+
 /// Maps a continuous pixel position of the rendered frame to the displayed
 /// region's pixels: `(p − offset) · scale`. The identity for a plain window;
 /// the crop of the adaptive window (DESIGN §4.5) otherwise.

@@ -139,12 +139,13 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
                     Pass::Holes,
                     Pass::Shading,
                     Pass::Shade,
+                    Pass::Pack,
                     Pass::Readback,
                 ],
             ),
             (
                 Method::Repeat,
-                vec![Pass::Upload, Pass::Crop, Pass::Readback],
+                vec![Pass::Upload, Pass::Crop, Pass::Pack, Pass::Readback],
             ),
             (
                 Method::Interp,
@@ -158,9 +159,11 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
                 run(&mut g, &mut feed);
             }
             for pass in passes {
-                // The CPU executor has no upload or read-back, and
-                // evaluates eq. 1 inside the warp (its time is the warp's).
-                if !gpu && matches!(pass, Pass::Upload | Pass::Readback | Pass::Motion) {
+                // The CPU executor has no upload, packing kernel or
+                // read-back, and evaluates eq. 1 inside the warp (its time
+                // is the warp's).
+                let host_only = [Pass::Upload, Pass::Pack, Pass::Readback, Pass::Motion];
+                if !gpu && host_only.contains(&pass) {
                     continue;
                 }
                 group.bench_function(format!("{method}/{}", pass.name()), |b| {

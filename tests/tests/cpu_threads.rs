@@ -42,7 +42,11 @@ fn run(threads: usize, method: Method, frames: &[Frame]) -> Vec<(String, Vec<u32
                 &[0.5, 2.0]
             };
             for &alpha in alphas {
-                let out = g.generate(alpha).unwrap().output;
+                let out = g
+                    .generate(alpha)
+                    .unwrap()
+                    .output
+                    .expect("the CPU keeps its output");
                 let mut bits: Vec<u32> = out.color.iter().flatten().map(|v| v.to_bits()).collect();
                 bits.extend(out.depth.iter().map(|v| v.to_bits()));
                 bits.extend(out.motion.iter().flatten().map(|v| v.to_bits()));

@@ -13,7 +13,7 @@
 
 use framegen::gpu::{Pool, Rec};
 use framegen::passes::common::splat::{self, Candidate, GpuSplat};
-use framegen::passes::common::{crop, pushpull};
+use framegen::passes::common::{crop, pack, pushpull, widen};
 use framegen::passes::gffe::warp;
 use framegen::{FrameGenerator, GpuContext, Method, PixelSource, Settings};
 use protocol::{Frame, FrameSize};
@@ -421,6 +421,165 @@ fn crop_matches() {
     }
 }
 
+/// Packing for the host is exact, bit for bit: the kernel's `f16`
+/// rounding (nearest, ties to even, subnormals kept) against the CPU's, on
+/// every kind of value the passes can leave, and an odd pixel count (the
+/// last source word part-filled).
+#[test]
+fn packing_is_exact() {
+    let ctx = ctx();
+    let gp = pack::GpuPack::new(&ctx);
+    let (w, h) = (61u32, 7u32);
+    let n = (w * h) as usize;
+    // Edge values: zeros of both signs, negatives, non-finite, the f16
+    // range's ends, halfway cases between two f16 (ties to even both
+    // ways), subnormal f16 and f32, and values beyond 65504.
+    let edges = [
+        0.0f32,
+        -0.0,
+        -1.0,
+        f32::NAN,
+        -f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        65504.0,
+        65519.0,
+        65520.0,
+        1e9,
+        f32::MAX,
+        1.0 + 2f32.powi(-11),
+        1.0 + 3.0 * 2f32.powi(-11),
+        1.0 + 2f32.powi(-11) + 2f32.powi(-20),
+        2f32.powi(-14),
+        2f32.powi(-15) * 1.5,
+        2f32.powi(-24),
+        2f32.powi(-25),
+        2f32.powi(-25) * 1.5,
+        2f32.powi(-26),
+        2f32.powi(-24) * 2.5,
+        2f32.powi(-24) * 3.5,
+        f32::MIN_POSITIVE,
+        f32::from_bits(1),
+        2f32.powi(-14) - 2f32.powi(-25),
+    ];
+    let mut out = framegen::output::Output::empty(w, h);
+    let mut x = 0x9e37_79b9u32;
+    let mut random = || {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        x
+    };
+    for t in 0..n {
+        // Edge values first, then random bit patterns of every magnitude.
+        let mut v = |c: usize| {
+            edges
+                .get(t * 3 + c)
+                .copied()
+                .unwrap_or_else(|| f32::from_bits(random() & 0x4fff_ffff))
+        };
+        out.color[t] = [v(0), v(1), v(2), f32::NAN];
+        out.depth[t] = [0.0, -0.0, -2.0, f32::NAN, f32::INFINITY, 3.5, 1e-30][t % 7];
+        out.motion[t] = [
+            [f32::NAN, 1.5],
+            [f32::INFINITY, -f32::INFINITY],
+            [-0.25, 1e30],
+        ][t % 3];
+        out.mask[t] = (t % 7) as u32;
+    }
+    let cpu = pack::pack(&out);
+    let bufs: Vec<_> = [
+        bytemuck::cast_slice::<_, u8>(&out.color).to_vec(),
+        bytemuck::cast_slice::<_, u8>(&out.depth).to_vec(),
+        bytemuck::cast_slice::<_, u8>(&out.motion).to_vec(),
+        bytemuck::cast_slice::<_, u8>(&out.mask).to_vec(),
+    ]
+    .iter()
+    .map(|b| ctx.storage_init("in", b))
+    .collect();
+    let [color_bytes, _, _, mask_bytes] = pack::packed_bytes(n as u64);
+    let pc = ctx.storage("pc", color_bytes);
+    let pm = ctx.storage("pm", mask_bytes);
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    let pool = Pool::default();
+    let o = warp::GpuOutput {
+        color: &bufs[0],
+        depth: &bufs[1],
+        motion: &bufs[2],
+        mask: &bufs[3],
+    };
+    let packed = pack::GpuPacked {
+        color: &pc,
+        mask: &pm,
+    };
+    gp.encode(&Rec::new(&ctx, &pool), &mut enc, n as u32, o, packed);
+    ctx.queue.submit([enc.finish()]);
+    let mut bytes = ctx.read(&pc, color_bytes).unwrap();
+    bytes.extend(ctx.read(&bufs[1], n as u64 * 4).unwrap());
+    bytes.extend(ctx.read(&bufs[2], n as u64 * 8).unwrap());
+    bytes.extend(ctx.read(&pm, mask_bytes).unwrap());
+    let gpu = pack::unpack(&bytes, w, h);
+    for t in 0..n {
+        let bits = |c: [half::f16; 4]| c.map(half::f16::to_bits);
+        assert_eq!(
+            bits(gpu.color[t]),
+            bits(cpu.color[t]),
+            "pixel {t}: {:?}",
+            out.color[t]
+        );
+        assert_eq!(gpu.depth[t].to_bits(), cpu.depth[t].to_bits(), "pixel {t}");
+        assert_eq!(
+            gpu.motion[t].map(f32::to_bits),
+            cpu.motion[t].map(f32::to_bits)
+        );
+    }
+    assert_eq!(gpu.mask, cpu.mask);
+    // What the edges became on the CPU side, spelled out.
+    let half = |v: f32| half::f16::from_f32(v).to_bits();
+    assert_eq!(bits_of(&cpu, 0), [0, 0, 0, half(1.0)]);
+    assert_eq!(bits_of(&cpu, 1)[..3], [0, 0, 0]);
+    assert_eq!(bits_of(&cpu, 2)[..3], [0, half(65504.0), half(65504.0)]);
+    assert!(cpu.mask.contains(&PixelSource::Filled));
+}
+
+fn bits_of(p: &pack::Packed, t: usize) -> [u16; 4] {
+    p.color[t].map(half::f16::to_bits)
+}
+
+/// The upload's widening of f16 colour is exact, bit for bit, on every
+/// f16 (subnormals, both zeros, negatives, ±inf; NaN stays NaN) and an odd
+/// pixel count.
+#[test]
+fn widening_is_exact() {
+    let ctx = ctx();
+    let gw = widen::GpuWiden::new(&ctx);
+    let all: Vec<[half::f16; 4]> = (0..=u16::MAX)
+        .step_by(4)
+        .map(|b| [b, b + 1, b + 2, b + 3].map(half::f16::from_bits))
+        .take(16_383)
+        .collect();
+    let n = all.len();
+    let narrow = ctx.storage_init("narrow", bytemuck::cast_slice(&all));
+    let color = ctx.storage("color", n as u64 * 16);
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    let pool = Pool::default();
+    gw.encode(&Rec::new(&ctx, &pool), &mut enc, n as u32, &narrow, &color);
+    ctx.queue.submit([enc.finish()]);
+    let gpu: Vec<[f32; 4]> = ctx.read_pod(&color, n).unwrap();
+    let cpu = widen::widen(&all);
+    for (t, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+        for ch in 0..4 {
+            assert!(
+                g[ch].to_bits() == c[ch].to_bits() || (g[ch].is_nan() && c[ch].is_nan()),
+                "{:?}: {} against {}",
+                all[t][ch],
+                g[ch],
+                c[ch]
+            );
+        }
+    }
+}
+
 /// The whole pipeline, every method (gffe with every stage, without
 /// shading correction, and camera-only for a stream without dynamic
 /// objects), every hard case, α = 0.5 and 2.
@@ -498,7 +657,8 @@ fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
                 // neighbourhood a little).
                 let color_diff = (0..n)
                     .filter(|&t| {
-                        (0..3).any(|c| !close(a.output.color[t][c], b.output.color[t][c], 1e-3))
+                        let (ca, cb) = (a.frame.color[t], b.frame.color[t]);
+                        (0..3).any(|c| !close(ca[c].to_f32(), cb[c].to_f32(), 1e-3))
                     })
                     .count();
                 let bound = n / 100 + 2;

@@ -112,7 +112,7 @@ fn motion_beyond_the_dissipation_limit_tears_but_stays_finite() {
             g.push(&cur).unwrap();
             let out = g.generate(0.5).unwrap();
             assert!(
-                out.output
+                out.frame
                     .color
                     .iter()
                     .all(|c| c.iter().all(|v| v.is_finite()))
@@ -131,7 +131,7 @@ fn motion_beyond_the_dissipation_limit_tears_but_stays_finite() {
             assert!(!written.is_empty() && written.iter().all(|&x| (300..316).contains(&x)));
             // Near the patch the inpainted motion is the patch's; beyond
             // ~512 px from it the motion has dissipated (decayed toward 0).
-            let mx = |x: u32| out.output.motion[(32 * w + x) as usize][0];
+            let mx = |x: u32| out.frame.motion[(32 * w + x) as usize][0];
             assert!(
                 (mx(320) - 300.0).abs() < 1.0,
                 "next to the patch: {}",

@@ -16,8 +16,10 @@ use crate::output::Output;
 use crate::passes::common::camera::PassCamera;
 use crate::passes::common::crop::{Crop, GpuCrop};
 use crate::passes::common::levels::Levels;
+use crate::passes::common::pack::{self, GpuPack, GpuPacked, Packed};
 use crate::passes::common::pushpull::{self, GpuHoles};
 use crate::passes::common::splat::GpuSplat;
+use crate::passes::common::widen::{self, GpuWiden};
 use crate::passes::gffe::background::{GpuBackground, Texel as BgTexel};
 use crate::passes::gffe::bgfill::GpuBgFill;
 use crate::passes::gffe::history::{GpuHistory, GpuHistoryBuffers};
@@ -39,6 +41,8 @@ struct Kernels {
     bgfill: GpuBgFill,
     holes: GpuHoles,
     crop: GpuCrop,
+    pack: GpuPack,
+    widen: GpuWiden,
     interp: GpuReproject,
     resolve: GpuResolve,
     shading: GpuShading,
@@ -118,6 +122,12 @@ struct Scratch {
     pyramid: Option<wgpu::Buffer>,
     dynamic: Option<wgpu::Buffer>,
     shaded: Option<wgpu::Buffer>,
+    /// The packed colour and source bytes of a generated frame.
+    packed_color: Option<wgpu::Buffer>,
+    packed_mask: Option<wgpu::Buffer>,
+    /// A rendered frame's colour as f16, on the host and on the device.
+    narrow: Vec<[half::f16; 4]>,
+    uploaded: Option<wgpu::Buffer>,
     /// Where a generated frame is copied for the CPU to read.
     staging: Option<wgpu::Buffer>,
     /// Where an ingest's dynamic-pixel count is copied for the CPU to read.
@@ -314,6 +324,8 @@ impl GpuBackend {
             bgfill: GpuBgFill::new(c),
             holes: GpuHoles::new(c),
             crop: GpuCrop::new(c),
+            pack: GpuPack::new(c),
+            widen: GpuWiden::new(c),
             interp: GpuReproject::new(c),
             resolve: GpuResolve::new(c),
             shading: GpuShading::new(c),
@@ -363,6 +375,95 @@ impl GpuBackend {
             }
         }
         Ok(b)
+    }
+
+    /// Runs `f` (a generation) inside an error scope, after checking the
+    /// device can hold the generated frame.
+    fn generating<T>(
+        &mut self,
+        job: &Job,
+        f: impl FnOnce(&mut Self) -> Result<T, FramegenError>,
+    ) -> Result<T, FramegenError> {
+        let tn = u64::from(job.target.width()) * u64::from(job.target.height());
+        self.ctx
+            .require_buffer("the generated frame's colour", tn * 16, true)?;
+        let scope = self.ctx.scope("generating a frame");
+        let out = f(self);
+        scope.finish()?;
+        out
+    }
+
+    /// The generated frame being made, at its end.
+    fn take_generation(&mut self) -> Result<Generation, FramegenError> {
+        self.generation
+            .take()
+            .ok_or(FramegenError::PassOrder("finish() before begin()"))
+    }
+
+    /// Ends the frame packed ([`pack`]): the kernel joins the generation's
+    /// submission, and 21 bytes a pixel are read back instead of 32.
+    fn finish_packed(&mut self) -> Result<Packed, FramegenError> {
+        let g = self.take_generation()?;
+        let n = u64::from(g.tn);
+        let [color_bytes, depth_bytes, motion_bytes, mask_bytes] = pack::packed_bytes(n);
+        let (ctx, pool) = (&*self.ctx, &self.rec.pool);
+        let s = &mut self.scratch;
+        let color = ensure(ctx, pool, &mut s.packed_color, "packed color", color_bytes).clone();
+        let mask = ensure(ctx, pool, &mut s.packed_mask, "packed mask", mask_bytes).clone();
+        let packed = GpuPacked {
+            color: &color,
+            mask: &mask,
+        };
+        let kernels = &self.kernels;
+        self.rec.pass(ctx, Pass::Pack, |gpu, enc| {
+            kernels.pack.encode(gpu, enc, g.tn, g.out(), packed);
+        })?;
+        let parts = [
+            (&color, color_bytes),
+            (&g.depth, depth_bytes),
+            (&g.motion, motion_bytes),
+            (&mask, mask_bytes),
+        ];
+        let (w, h) = g.size;
+        self.read_back(&parts, |bytes| pack::unpack(bytes, w, h))
+    }
+
+    /// Copies the first bytes of each buffer, one after the other, into
+    /// one persistent staging buffer as part of the generation's own
+    /// submission (one submit and one wait per generated frame), and hands
+    /// the mapped bytes to `read`.
+    fn read_back<T>(
+        &mut self,
+        parts: &[(&wgpu::Buffer, u64)],
+        read: impl FnOnce(&[u8]) -> T,
+    ) -> Result<T, FramegenError> {
+        let total = parts.iter().map(|(_, len)| len).sum::<u64>();
+        let ctx = &*self.ctx;
+        let s = &mut self.scratch.staging;
+        if s.as_ref().is_none_or(|b| b.size() < total) {
+            *s = Some(ctx.staging("generated frame read-back", total));
+        }
+        let staging = s.as_ref().expect("just allocated");
+        let start = Instant::now();
+        let encoder = self
+            .rec
+            .encoder
+            .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
+        let mut offset = 0;
+        for &(buffer, len) in parts {
+            encoder.copy_buffer_to_buffer(buffer, 0, staging, offset, len);
+            offset += len;
+        }
+        self.rec.flush(ctx)?;
+        let out = ctx.map_read(staging, total, read)?;
+        if self.rec.profile {
+            self.rec.timings.push(PassTime {
+                pass: Pass::Readback,
+                time: start.elapsed(),
+                gpu: None,
+            });
+        }
+        Ok(out)
     }
 
     /// Records one generation pass (submitting and timing it when
@@ -432,13 +533,14 @@ impl Backend for GpuBackend {
     }
 
     fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
-        let tn = u64::from(job.target.width()) * u64::from(job.target.height());
-        self.ctx
-            .require_buffer("the generated frame's colour", tn * 16, true)?;
-        let scope = self.ctx.scope("generating a frame");
-        let out = crate::pipeline::generate(self, job);
-        scope.finish()?;
-        out
+        self.generating(job, |b| crate::pipeline::generate(b, job))
+    }
+
+    fn generate_packed(&mut self, job: &Job) -> Result<(Packed, Option<Output>), FramegenError> {
+        self.generating(job, |b| {
+            crate::pipeline::passes(b, job)?;
+            Ok((b.finish_packed()?, None))
+        })
     }
 
     fn reset(&mut self) {
@@ -509,12 +611,29 @@ impl Executor for GpuBackend {
         buffers.camera = plan.camera;
         buffers.has_ratio = false;
         let queue = &ctx.queue;
-        queue.write_buffer(&buffers.color, 0, bytemuck::cast_slice(&frame.color));
+        // Colour crosses as f16 and is widened on the device (`widen`).
+        widen::narrow(&frame.color, &mut self.scratch.narrow);
+        let s = &mut self.scratch;
+        let uploaded = ensure(
+            ctx,
+            &self.rec.pool,
+            &mut s.uploaded,
+            "uploaded color",
+            u64::from(n) * 8,
+        );
+        queue.write_buffer(uploaded, 0, bytemuck::cast_slice(&s.narrow));
         queue.write_buffer(&buffers.depth, 0, bytemuck::cast_slice(&frame.depth));
         queue.write_buffer(&buffers.motion, 0, bytemuck::cast_slice(&frame.motion));
+        let encoder = self
+            .rec
+            .encoder
+            .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
+        let rec = Rec::new(ctx, &self.rec.pool);
+        self.kernels
+            .widen
+            .encode(&rec, encoder, n, uploaded, &buffers.color);
         if self.rec.profile {
-            queue.submit([]);
-            ctx.wait()?;
+            self.rec.flush(ctx)?;
             self.rec.timings.push(PassTime {
                 pass: Pass::Upload,
                 time: start.elapsed(),
@@ -851,59 +970,27 @@ impl Executor for GpuBackend {
     }
 
     fn finish(&mut self) -> Result<Output, FramegenError> {
-        let g = self
-            .generation
-            .take()
-            .ok_or(FramegenError::PassOrder("finish() before begin()"))?;
-        let n = g.tn as usize;
+        let g = self.take_generation()?;
+        let n = u64::from(g.tn);
         let parts = [
             (&g.color, n * 16),
             (&g.depth, n * 4),
             (&g.motion, n * 8),
             (&g.mask, n * 4),
         ];
-        let total = parts.iter().map(|(_, len)| *len as u64).sum::<u64>();
-        let ctx = &*self.ctx;
-        let s = &mut self.scratch.staging;
-        if s.as_ref().is_none_or(|b| b.size() < total) {
-            *s = Some(ctx.staging("generated frame read-back", total));
-        }
-        let staging = s.as_ref().expect("just allocated");
-        // The copies join the generation's own submission (one submit and
-        // one wait per generated frame), into one persistent staging
-        // buffer; the mapped bytes are copied once, into the output's
-        // typed buffers.
-        let start = Instant::now();
-        let encoder = self
-            .rec
-            .encoder
-            .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
-        let mut offset = 0;
-        for (buffer, len) in parts {
-            encoder.copy_buffer_to_buffer(buffer, 0, staging, offset, len as u64);
-            offset += len as u64;
-        }
-        self.rec.flush(ctx)?;
-        let output = ctx.map_read(staging, total, |bytes| {
+        let (n, (w, h)) = (g.tn as usize, g.size);
+        self.read_back(&parts, |bytes| {
             let (color, rest) = bytes.split_at(n * 16);
             let (depth, rest) = rest.split_at(n * 4);
             let (motion, mask) = rest.split_at(n * 8);
             Output {
-                width: g.size.0,
-                height: g.size.1,
+                width: w,
+                height: h,
                 color: bytemuck::pod_collect_to_vec(color),
                 depth: bytemuck::pod_collect_to_vec(depth),
                 motion: bytemuck::pod_collect_to_vec(motion),
-                mask: bytemuck::pod_collect_to_vec(mask),
+                mask: bytemuck::pod_collect_to_vec(&mask[..n * 4]),
             }
-        })?;
-        if self.rec.profile {
-            self.rec.timings.push(PassTime {
-                pass: Pass::Readback,
-                time: start.elapsed(),
-                gpu: None,
-            });
-        }
-        Ok(output)
+        })
     }
 }

@@ -17,6 +17,7 @@ use crate::output::{DisplayMap, Output};
 use crate::passes::common::camera::PassCamera;
 use crate::passes::common::crop::Crop;
 use crate::passes::common::levels::Levels;
+use crate::passes::common::pack::Packed;
 use crate::passes::common::resample::Resample;
 use crate::settings::Method;
 
@@ -48,6 +49,9 @@ pub enum Pass {
     Shading,
     /// Shading correction applied to the colour the warp moves.
     Shade,
+    /// (GPU) packing the generated frame for the host
+    /// ([`crate::passes::common::pack`]).
+    Pack,
     /// (GPU) reading the generated frame back.
     Readback,
 }
@@ -68,6 +72,7 @@ impl Pass {
             Pass::Resolve => "resolve",
             Pass::Shading => "shading",
             Pass::Shade => "shade",
+            Pass::Pack => "pack",
             Pass::Readback => "readback",
         }
     }
@@ -221,6 +226,14 @@ pub fn ingest<E: Executor + ?Sized>(
 
 /// Every method's generation plan, written once for both executors.
 pub fn generate<E: Executor + ?Sized>(e: &mut E, job: &Job) -> Result<Output, FramegenError> {
+    passes(e, job)?;
+    e.finish()
+}
+
+/// The generation plan's passes, up to (not including) the hand-over of
+/// the output: [`generate`] then calls [`Executor::finish`], an executor
+/// that packs the frame where it made it its own ending.
+pub fn passes<E: Executor + ?Sized>(e: &mut E, job: &Job) -> Result<(), FramegenError> {
     e.begin(job)?;
     match job.method {
         Method::Repeat => e.crop(&job.crop, true)?,
@@ -253,7 +266,7 @@ pub fn generate<E: Executor + ?Sized>(e: &mut E, job: &Job) -> Result<Output, Fr
             e.pushpull(job)?;
         }
     }
-    e.finish()
+    Ok(())
 }
 
 /// Runs the passes.
@@ -265,6 +278,15 @@ pub trait Backend: Send {
     fn ingest(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<u32, FramegenError>;
     /// Runs the generation passes for `job` on the last ingested frame.
     fn generate(&mut self, job: &Job) -> Result<Output, FramegenError>;
+    /// [`Backend::generate`], packed for the host
+    /// ([`crate::passes::common::pack`]), with the `f32` output where the
+    /// backend has it on the host anyway. The default packs on the CPU; the
+    /// wgpu backend packs on the device and reads back only the packed
+    /// frame.
+    fn generate_packed(&mut self, job: &Job) -> Result<(Packed, Option<Output>), FramegenError> {
+        let out = self.generate(job)?;
+        Ok((crate::passes::common::pack::pack(&out), Some(out)))
+    }
     /// Drops all history.
     fn reset(&mut self);
     /// Wall times of the passes of the last `ingest` + `generate`.
