@@ -125,8 +125,9 @@ struct Scratch {
     /// The packed colour and source bytes of a generated frame.
     packed_color: Option<wgpu::Buffer>,
     packed_mask: Option<wgpu::Buffer>,
-    /// A rendered frame's colour as f16, on the host and on the device.
-    narrow: Vec<[half::f16; 4]>,
+    /// Where a rendered frame is written for the GPU to copy, and its
+    /// colour as f16 on the device.
+    upload: Option<wgpu::Buffer>,
     uploaded: Option<wgpu::Buffer>,
     /// Where a generated frame is copied for the CPU to read.
     staging: Option<wgpu::Buffer>,
@@ -610,24 +611,40 @@ impl Executor for GpuBackend {
         };
         buffers.camera = plan.camera;
         buffers.has_ratio = false;
-        let queue = &ctx.queue;
         // Colour crosses as f16 and is widened on the device (`widen`).
-        widen::narrow(&frame.color, &mut self.scratch.narrow);
+        // The three buffers are written on all cores into one staging
+        // buffer kept from frame to frame, and copied from there.
+        let n64 = u64::from(n);
+        let [color_bytes, depth_bytes, motion_bytes] = [n64 * 8, n64 * 4, n64 * 8];
+        let total = color_bytes + depth_bytes + motion_bytes;
         let s = &mut self.scratch;
+        if s.upload.as_ref().is_none_or(|b| b.size() < total) {
+            s.upload = Some(ctx.upload_staging("rendered frame upload", total));
+        }
+        let staging = s.upload.as_ref().expect("just allocated");
+        ctx.map_write(staging, total, |view| {
+            let (color, rest) = view.split_at(color_bytes as usize);
+            let (depth, motion) = rest.split_at(depth_bytes as usize);
+            widen::narrow_into(&frame.color, color);
+            crate::gpu::par_write(bytemuck::cast_slice(&frame.depth), depth);
+            crate::gpu::par_write(bytemuck::cast_slice(&frame.motion), motion);
+        })?;
         let uploaded = ensure(
             ctx,
             &self.rec.pool,
             &mut s.uploaded,
             "uploaded color",
-            u64::from(n) * 8,
+            color_bytes,
         );
-        queue.write_buffer(uploaded, 0, bytemuck::cast_slice(&s.narrow));
-        queue.write_buffer(&buffers.depth, 0, bytemuck::cast_slice(&frame.depth));
-        queue.write_buffer(&buffers.motion, 0, bytemuck::cast_slice(&frame.motion));
         let encoder = self
             .rec
             .encoder
             .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
+        let staging = s.upload.as_ref().expect("allocated above");
+        encoder.copy_buffer_to_buffer(staging, 0, uploaded, 0, color_bytes);
+        encoder.copy_buffer_to_buffer(staging, color_bytes, &buffers.depth, 0, depth_bytes);
+        let offset = color_bytes + depth_bytes;
+        encoder.copy_buffer_to_buffer(staging, offset, &buffers.motion, 0, motion_bytes);
         let rec = Rec::new(ctx, &self.rec.pool);
         self.kernels
             .widen

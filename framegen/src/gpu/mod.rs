@@ -101,12 +101,31 @@ impl GpuContext {
     /// A buffer the GPU copies results into for the CPU to read
     /// ([`GpuContext::map_read`]).
     pub fn staging(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        let usage = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        self.mappable(label, bytes, usage)
+    }
+
+    /// A buffer the CPU maps, of at least `bytes` bytes.
+    fn mappable(&self, label: &str, bytes: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
         self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: bytes.max(16).next_multiple_of(wgpu::MAP_ALIGNMENT),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            usage,
             mapped_at_creation: false,
         })
+    }
+
+    /// Maps `slice` and waits for it (for the submitted work that uses the
+    /// buffer first).
+    fn map(&self, slice: &wgpu::BufferSlice<'_>, mode: wgpu::MapMode) -> Result<(), FramegenError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(mode, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        rx.recv()
+            .map_err(|e| FramegenError::Device(e.to_string()))?
+            .map_err(|e| FramegenError::Device(e.to_string()))
     }
 
     /// Maps the first `len` bytes of a staging buffer whose copies were
@@ -118,19 +137,41 @@ impl GpuContext {
         read: impl FnOnce(&[u8]) -> T,
     ) -> Result<T, FramegenError> {
         let slice = staging.slice(..len.next_multiple_of(4));
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        self.wait()?;
-        rx.recv()
-            .map_err(|e| FramegenError::Device(e.to_string()))?
-            .map_err(|e| FramegenError::Device(e.to_string()))?;
+        self.map(&slice, wgpu::MapMode::Read)?;
         let out = {
             let view = slice
                 .get_mapped_range()
                 .map_err(|e| FramegenError::Device(format!("read-back: {e:?}")))?;
             read(&view[..len as usize])
+        };
+        staging.unmap();
+        Ok(out)
+    }
+
+    /// A buffer the CPU writes into for the GPU to copy from
+    /// ([`GpuContext::map_write`]), kept from frame to frame: no staging
+    /// memory is allocated per upload.
+    pub fn upload_staging(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        let usage = wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC;
+        self.mappable(label, bytes, usage)
+    }
+
+    /// Maps the first `len` bytes of an upload staging buffer (waiting for
+    /// the copies that last read it), hands them to `write`, and unmaps it:
+    /// copies recorded after this read what was written.
+    pub fn map_write<T>(
+        &self,
+        staging: &wgpu::Buffer,
+        len: u64,
+        write: impl FnOnce(wgpu::WriteOnly<'_, [u8]>) -> T,
+    ) -> Result<T, FramegenError> {
+        let slice = staging.slice(..len.max(1).next_multiple_of(wgpu::MAP_ALIGNMENT));
+        self.map(&slice, wgpu::MapMode::Write)?;
+        let out = {
+            let mut view = slice
+                .get_mapped_range_mut()
+                .map_err(|e| FramegenError::Device(format!("upload: {e:?}")))?;
+            write(view.slice(..len as usize))
         };
         staging.unmap();
         Ok(out)
@@ -157,6 +198,30 @@ impl GpuContext {
         let bytes = self.read(buffer, (count * std::mem::size_of::<T>()) as u64)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
+}
+
+/// `dst` cut into pieces of `N` bytes, to be written on several cores,
+/// and what is left after the last whole piece. (A piece of a fixed size
+/// can move to another thread; `wgpu` lets only sized write-only views do.)
+pub fn write_pieces<const N: usize>(
+    dst: wgpu::WriteOnly<'_, [u8]>,
+) -> (Vec<wgpu::WriteOnly<'_, [u8; N]>>, wgpu::WriteOnly<'_, [u8]>) {
+    let (pieces, rest) = dst.into_chunks::<N>();
+    (pieces.into_iter().collect(), rest)
+}
+
+/// Copies `src` into `dst` (of the same length) on all cores: one core
+/// alone moves a frame at a fraction of the memory bandwidth.
+pub fn par_write(src: &[u8], dst: wgpu::WriteOnly<'_, [u8]>) {
+    use rayon::prelude::*;
+    const PIECE: usize = 1 << 16;
+    let (pieces, mut rest) = write_pieces::<PIECE>(dst);
+    let whole = pieces.len() * PIECE;
+    pieces
+        .into_par_iter()
+        .zip(src[..whole].par_chunks_exact(PIECE))
+        .for_each(|(d, s)| wgpu::WriteOnly::<[u8]>::from(d).copy_from_slice(s));
+    rest.copy_from_slice(&src[whole..]);
 }
 
 /// How a kernel sees one binding (its index is its place in the list).
@@ -307,5 +372,19 @@ impl Kernel {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &group, &[]);
         pass.dispatch_workgroups(x, y, 1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_parallel_write_copies_every_byte() {
+        // Whole pieces and a partial last one.
+        let src: Vec<u8> = (0..200_003u32).map(|i| (i * 7 % 251) as u8).collect();
+        let mut dst = vec![0u8; src.len()];
+        super::par_write(&src, dst.as_mut_slice().into());
+        assert_eq!(dst, src);
+        let mut empty: [u8; 0] = [];
+        super::par_write(&[], empty.as_mut_slice().into());
     }
 }

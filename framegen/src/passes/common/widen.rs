@@ -15,19 +15,40 @@ use half::f16;
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::input::CONVERT_BLOCK;
 
-/// `f32` colour as `f16` into `out` (resized to fit), on all cores, with
-/// the CPU's `f16` instructions (rounding to nearest; exact on sanitised
-/// colour).
-pub fn narrow(color: &[[f32; 4]], out: &mut Vec<[f16; 4]>) {
-    use half::slice::HalfFloatSliceExt;
+/// `f32` colour as `f16` bytes (8 a pixel) into `out`, on all cores, in
+/// blocks converted with the CPU's `f16` instructions (rounding to nearest;
+/// exact on sanitised colour).
+pub fn narrow_into(color: &[[f32; 4]], out: wgpu::WriteOnly<'_, [u8]>) {
     use rayon::prelude::*;
-    out.resize(color.len(), [f16::ZERO; 4]);
-    out.par_chunks_mut(CONVERT_BLOCK)
-        .zip(color.par_chunks(CONVERT_BLOCK))
-        .for_each(|(dst, src)| {
-            dst.as_flattened_mut()
-                .convert_from_f32_slice(src.as_flattened())
-        });
+    const BYTES: usize = CONVERT_BLOCK * 8;
+    let (pieces, rest) = crate::gpu::write_pieces::<BYTES>(out);
+    let whole = pieces.len() * CONVERT_BLOCK;
+    pieces
+        .into_par_iter()
+        .zip(color[..whole].par_chunks_exact(CONVERT_BLOCK))
+        .for_each(|(dst, src)| convert(src, dst.into()));
+    convert(&color[whole..], rest);
+}
+
+/// One block of [`narrow_into`].
+fn convert(src: &[[f32; 4]], mut dst: wgpu::WriteOnly<'_, [u8]>) {
+    use half::slice::HalfFloatSliceExt;
+    let mut block = [[f16::ZERO; 4]; CONVERT_BLOCK];
+    let block = &mut block[..src.len()];
+    block
+        .as_flattened_mut()
+        .convert_from_f32_slice(src.as_flattened());
+    dst.copy_from_slice(bytemuck::cast_slice(block));
+}
+
+/// [`narrow_into`] a vector.
+pub fn narrow(color: &[[f32; 4]]) -> Vec<[f16; 4]> {
+    let mut out = vec![[f16::ZERO; 4]; color.len()];
+    narrow_into(
+        color,
+        bytemuck::cast_slice_mut::<_, u8>(&mut out[..]).into(),
+    );
+    out
 }
 
 /// CPU reference of `widen`: `f16` colour as `f32`.
@@ -92,9 +113,10 @@ mod tests {
                 let v = f16::from_bits(b).to_f32();
                 [v, 0.0, 65504.0, 1.0]
             })
+            // A last, partial block.
+            .chain([[1.5, 2.0, 3.0, 1.0]])
             .collect();
-        let mut half = Vec::new();
-        narrow(&all, &mut half);
+        let half = narrow(&all);
         assert_eq!(widen(&half), all);
         assert_eq!(half[0x3c00][0], f16::ONE);
     }
