@@ -191,7 +191,7 @@ impl FrameGenerator {
             size: FrameSize { width, height },
             ..frame.meta
         };
-        Ok(finish(meta, 0.0, out).frame)
+        Ok(finish(meta, 0.0, out)?.frame)
     }
 
     /// The backend's name.
@@ -439,7 +439,7 @@ impl FrameGenerator {
             cut: false,
         };
         let (packed, output) = self.backend.generate_packed(&job)?;
-        Ok(assemble(meta, alpha, packed, output))
+        assemble(meta, alpha, packed, output)
     }
 }
 
@@ -469,18 +469,29 @@ fn displayed_region(meta: &FrameMeta, display_size: Option<(u32, u32)>) -> ((u32
 
 /// Turns the passes' output into a [`Generated`] (the CPU reference's
 /// packing; the f32 output is kept).
-pub(crate) fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Generated {
+pub(crate) fn finish(meta: FrameMeta, alpha: f64, out: Output) -> Result<Generated, FramegenError> {
     let packed = crate::passes::common::pack::pack(&out);
     assemble(meta, alpha, packed, Some(out))
 }
 
-/// A [`Generated`] of packed buffers.
+/// A [`Generated`] of packed buffers, which must be of the size `meta`
+/// says (an executor that made another size is refused, not passed on as
+/// a frame whose buffers contradict its header).
 pub(crate) fn assemble(
     meta: FrameMeta,
     alpha: f64,
     packed: Packed,
     output: Option<Output>,
-) -> Generated {
+) -> Result<Generated, FramegenError> {
+    let size = meta.size;
+    if (packed.width, packed.height) != (size.width, size.height) {
+        return Err(FramegenError::Sizes(
+            packed.width,
+            packed.height,
+            size.width,
+            size.height,
+        ));
+    }
     let frame = Frame {
         meta,
         color: packed.color,
@@ -488,10 +499,29 @@ pub(crate) fn assemble(
         motion: packed.motion,
         extras: Vec::new(),
     };
-    Generated {
+    Ok(Generated {
         frame,
         alpha,
         mask: packed.mask,
         output,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::output::Pixel;
+
+    #[test]
+    fn a_generated_frame_of_another_size_is_refused() {
+        let meta = crate::testutil::frame(0, FrameSize::new(4, 2)).meta;
+        let fits = Output::from_fn(4, 2, |_| Pixel::EMPTY);
+        let g = finish(meta, 0.5, fits).expect("the size of its header");
+        assert_eq!(g.frame.color.len(), 8);
+        let other = Output::from_fn(2, 4, |_| Pixel::EMPTY);
+        assert!(matches!(
+            finish(meta, 0.5, other),
+            Err(FramegenError::Sizes(2, 4, 4, 2))
+        ));
     }
 }

@@ -42,7 +42,10 @@ impl Sanitized {
 /// A rendered frame's buffers as the passes read them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prepared {
-    /// Linear RGB, alpha 1.
+    /// Linear RGB, alpha 1. [`prepare`] makes it from the frame's `f16`,
+    /// zeroed or clamped to 65504, so every value is an `f16` and the wgpu
+    /// executor uploads it as one (`passes::common::widen`) without loss;
+    /// a value made by hand that an `f16` cannot hold is rounded there.
     pub color: Vec<[f32; 4]>,
     /// Linear depth; 0 = no surface, `+inf` = sky.
     pub depth: Vec<f32>,

@@ -77,7 +77,7 @@ pub fn backward_warp(
     out.motion.copy_from_slice(&dst.motion);
     let mut meta = truth.meta;
     meta.cut = false;
-    Ok(finish(meta, alpha, out))
+    finish(meta, alpha, out)
 }
 
 /// Below this value of a channel without the change (`unshaded`) the

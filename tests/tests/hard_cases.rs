@@ -22,6 +22,7 @@
 //! | 8 extrapolations in a row | [`a_chain_of_eight_extrapolations`] |
 //! | a 1×1 frame and an 8192×16 frame | [`tiny_and_extreme_aspect_frames`] |
 //! | α out of range, short buffers | [`bad_alpha_and_short_buffers`] |
+//! | a device too small for the frame's buffers | [`a_device_too_small_for_the_frame_is_a_typed_error`] |
 //! | a field of view of 1e-3 rad, the camera 1e12 out, near 1e-6, time 1e9 (the validation limits; beyond them a typed error) | [`cameras_and_times_at_the_validation_limits`] |
 
 use std::sync::Arc;
@@ -319,6 +320,50 @@ fn bad_alpha_and_short_buffers() {
         g.push(&short),
         Err(framegen::FramegenError::Frame(_))
     ));
+}
+
+/// A device whose buffers can hold 18 bytes a pixel: every storage
+/// buffer of the methods without history (16 B a pixel at most) fits, but
+/// not the staging buffers the wgpu executor uploads through (20 B) and
+/// reads back through (21 B), nor gffe's history (32 B). Every method is
+/// refused with a typed error naming the limit (never a panic or wgpu's
+/// abort), and the same generator then goes on with frames that fit.
+#[test]
+fn a_device_too_small_for_the_frame_is_a_typed_error() {
+    let adapter = gpu_device::adapter().expect("a wgpu adapter (lavapipe in CI)");
+    let cap = (SIZE.pixels() * 18).next_multiple_of(256);
+    let limits = wgpu::Limits {
+        max_buffer_size: cap,
+        max_storage_buffer_binding_size: cap,
+        ..adapter.limits()
+    };
+    let ctx = GpuContext::with_limits(&adapter, limits).expect("a smaller device");
+    let big = frames("cut");
+    let small = tests::render_scene("cut", FrameSize::new(48, 26), 60.0, 40..44);
+    for method in Method::ALL {
+        let s = Settings::for_method(method);
+        let mut g = FrameGenerator::gpu(s, ctx.clone()).unwrap();
+        let mut run = || -> Result<(), framegen::FramegenError> {
+            for f in big.iter().take(3) {
+                g.push(f)?;
+            }
+            g.generate(0.5).map(|_| ())
+        };
+        let refused = run()
+            .err()
+            .unwrap_or_else(|| panic!("{method}: a frame too large for the device was accepted"));
+        let text = refused.to_string();
+        assert!(
+            matches!(refused, framegen::FramegenError::Gpu(_)) && text.contains("max_"),
+            "{method}: {text}"
+        );
+        // The generator that refused goes on with frames that fit.
+        for f in framegen::decimate::decimate(&small, 2) {
+            g.push(&f).unwrap();
+        }
+        let fits = g.generate(0.5).unwrap();
+        assert_bounded(&fits, &format!("{method} on the smaller device"));
+    }
 }
 
 /// The analytic scene (a checkered ground plane under a sky, exact depth

@@ -30,6 +30,10 @@ use crate::passes::interp::reproject::GpuReproject;
 use crate::passes::interp::resolve::{GpuImage, GpuResolve};
 use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapshot};
 
+/// Bytes a pixel of a rendered frame takes in the upload's staging buffer:
+/// `f16` colour (8), depth (4) and motion (8).
+const UPLOAD_BYTES: u64 = 20;
+
 /// Every kernel, compiled once.
 #[derive(Debug)]
 struct Kernels {
@@ -388,9 +392,32 @@ impl GpuBackend {
         let tn = u64::from(job.target.width()) * u64::from(job.target.height());
         self.ctx
             .require_buffer("the generated frame's colour", tn * 16, true)?;
-        let scope = self.ctx.scope("generating a frame");
+        let packed = pack::packed_bytes(tn).iter().sum();
+        self.ctx
+            .require_buffer("the generated frame's read-back", packed, false)?;
+        self.scoped("generating a frame", f)
+    }
+
+    /// Runs `f` inside an error scope named `what`. After an error the
+    /// scratch buffers and the frame being ingested or generated are
+    /// dropped: a buffer the failed work created may be invalid, and kept
+    /// for the next frame it would fail that one too.
+    fn scoped<T>(
+        &mut self,
+        what: &str,
+        f: impl FnOnce(&mut Self) -> Result<T, FramegenError>,
+    ) -> Result<T, FramegenError> {
+        let scope = self.ctx.scope(what);
         let out = f(self);
-        scope.finish()?;
+        let out = scope.finish().map_err(FramegenError::from).and(out);
+        if out.is_err() {
+            self.scratch = Scratch::default();
+            self.rec.pool.clear_groups();
+            self.rec.encoder = None;
+            self.ingest = None;
+            self.generation = None;
+            self.spare = None;
+        }
         out
     }
 
@@ -527,10 +554,11 @@ impl Backend for GpuBackend {
         let what = format!("a {}-pixel frame's history (k = {})", n, plan.k);
         self.ctx
             .require_buffer(&what, n * u64::from(plan.k.max(1)) * 16, true)?;
-        let scope = self.ctx.scope("ingesting a frame");
-        let out = crate::pipeline::ingest(self, frame, plan);
-        scope.finish()?;
-        out
+        self.ctx
+            .require_buffer("the rendered frame's upload", n * UPLOAD_BYTES, false)?;
+        self.scoped("ingesting a frame", |b| {
+            crate::pipeline::ingest(b, frame, plan)
+        })
     }
 
     fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
@@ -616,7 +644,7 @@ impl Executor for GpuBackend {
         // buffer kept from frame to frame, and copied from there.
         let n64 = u64::from(n);
         let [color_bytes, depth_bytes, motion_bytes] = [n64 * 8, n64 * 4, n64 * 8];
-        let total = color_bytes + depth_bytes + motion_bytes;
+        let total = n64 * UPLOAD_BYTES;
         let s = &mut self.scratch;
         if s.upload.as_ref().is_none_or(|b| b.size() < total) {
             s.upload = Some(ctx.upload_staging("rendered frame upload", total));

@@ -55,13 +55,23 @@ impl GpuContext {
     /// because 8192-pixel frames need storage buffers beyond WebGPU's
     /// defaults.
     pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<Arc<Self>, FramegenError> {
+        Self::with_limits(adapter, adapter.limits())
+    }
+
+    /// Opens a device on `adapter` with `limits` (at most the adapter's):
+    /// a device smaller than the adapter, e.g. to check that a frame too
+    /// large for it is refused with a typed error naming the limit.
+    pub fn with_limits(
+        adapter: &wgpu::Adapter,
+        limits: wgpu::Limits,
+    ) -> Result<Arc<Self>, FramegenError> {
         let gpu = gpu_device::Device::open(
             adapter,
             &wgpu::DeviceDescriptor {
                 label: Some("framegen"),
                 // Timestamp queries where offered (profiling on hardware).
                 required_features: adapter.features() & timestamps::FEATURES,
-                required_limits: adapter.limits(),
+                required_limits: limits,
                 experimental_features: wgpu::ExperimentalFeatures::disabled(),
                 memory_hints: wgpu::MemoryHints::Performance,
                 trace: wgpu::Trace::Off,

@@ -41,16 +41,6 @@ fn convert(src: &[[f32; 4]], mut dst: wgpu::WriteOnly<'_, [u8]>) {
     dst.copy_from_slice(bytemuck::cast_slice(block));
 }
 
-/// [`narrow_into`] a vector.
-pub fn narrow(color: &[[f32; 4]]) -> Vec<[f16; 4]> {
-    let mut out = vec![[f16::ZERO; 4]; color.len()];
-    narrow_into(
-        color,
-        bytemuck::cast_slice_mut::<_, u8>(&mut out[..]).into(),
-    );
-    out
-}
-
 /// CPU reference of `widen`: `f16` colour as `f32`.
 pub fn widen(color: &[[f16; 4]]) -> Vec<[f32; 4]> {
     color.iter().map(|c| c.map(f16::to_f32)).collect()
@@ -104,6 +94,16 @@ impl GpuWiden {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`narrow_into`] a vector.
+    fn narrow(color: &[[f32; 4]]) -> Vec<[f16; 4]> {
+        let mut out = vec![[f16::ZERO; 4]; color.len()];
+        narrow_into(
+            color,
+            bytemuck::cast_slice_mut::<_, u8>(&mut out[..]).into(),
+        );
+        out
+    }
 
     #[test]
     fn narrowing_sanitised_colour_is_exact() {
