@@ -93,12 +93,20 @@ pub struct FrameWriter {
     queue: Option<SyncSender<Frame>>,
     thread: Option<JoinHandle<anyhow::Result<()>>>,
     waited: bool,
+    /// What waits when the queue is full (named in the warning).
+    waiter: &'static str,
 }
 
 impl FrameWriter {
     /// Starts a thread that writes every frame to each of `sinks` in turn,
-    /// with room for `capacity` frames waiting (at least one).
-    pub fn start(sinks: Vec<Box<dyn FrameSink>>, capacity: usize) -> anyhow::Result<Self> {
+    /// with room for `capacity` frames waiting (at least one). `waiter`
+    /// names what waits when the queue is full ("presentation",
+    /// "reception"), for the warning that says so.
+    pub fn start(
+        sinks: Vec<Box<dyn FrameSink>>,
+        capacity: usize,
+        waiter: &'static str,
+    ) -> anyhow::Result<Self> {
         let (queue, frames) = sync_channel(capacity.max(1));
         let thread = std::thread::Builder::new()
             .name("frame-writer".into())
@@ -108,13 +116,16 @@ impl FrameWriter {
             queue: Some(queue),
             thread: Some(thread),
             waited: false,
+            waiter,
         })
     }
 
-    /// Room for [`QUEUE_BYTES`] of frames of `size` (colour, depth and
-    /// motion: 20 bytes a pixel).
+    /// Room for [`QUEUE_BYTES`] of frames of `size` (a [`Frame`]'s
+    /// colour, depth and motion: 20 bytes a pixel).
     pub fn capacity_for(size: FrameSize) -> usize {
-        let frame = (size.pixels() * 20).max(1);
+        use std::mem::size_of;
+        let pixel = size_of::<[half::f16; 4]>() + size_of::<f32>() + size_of::<[f32; 2]>();
+        let frame = (size.pixels() * pixel as u64).max(1);
         usize::try_from(QUEUE_BYTES / frame).unwrap_or(usize::MAX)
     }
 
@@ -133,7 +144,8 @@ impl FrameWriter {
         if !self.waited {
             self.waited = true;
             tracing::warn!(
-                "the disk is slower than the display: presentation waits for the frame writer"
+                "the disk is slower than the frames come: {} waits for the frame writer",
+                self.waiter
             );
         }
         match queue.send(item) {
@@ -267,7 +279,7 @@ mod tests {
         let (p, seen) = probe(Some(stall.clone()), None);
         let (finished, done) = channel();
         let p = Probe { finished, ..p };
-        let mut w = FrameWriter::start(vec![Box::new(p)], 8).unwrap();
+        let mut w = FrameWriter::start(vec![Box::new(p)], 8, "the test").unwrap();
         // The sink is stuck on frame 0 (or about to be): the queue takes 8
         // frames without waiting.
         for id in 0..8 {
@@ -286,7 +298,7 @@ mod tests {
     #[test]
     fn a_failing_sink_is_reported_at_the_next_write_or_at_the_finish() {
         let (p, seen) = probe(None, Some(2));
-        let mut w = FrameWriter::start(vec![Box::new(p)], 1).unwrap();
+        let mut w = FrameWriter::start(vec![Box::new(p)], 1, "the test").unwrap();
         let mut error = None;
         for id in 0..50 {
             if let Err(e) = w.write(Frame::blank(id, SIZE)) {
@@ -307,7 +319,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let manifest = protocol::dump::Manifest::new(60.0, SIZE, "t");
         let dump = DumpWriter::create(dir.path(), manifest).unwrap();
-        let mut w = FrameWriter::start(vec![Box::new(DumpSink(dump))], 2).unwrap();
+        let mut w = FrameWriter::start(vec![Box::new(DumpSink(dump))], 2, "the test").unwrap();
         for id in [0, 1, 3] {
             w.write(Frame::blank(id, SIZE)).unwrap();
         }

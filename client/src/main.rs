@@ -440,6 +440,7 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
                         .with_effects(w.effects),
                 )?))],
                 FrameWriter::capacity_for(w.size),
+                "reception",
             )?),
             None => None,
         };

@@ -290,12 +290,11 @@ pub async fn run_headless(
     if let Some(dir) = &config.png_dir {
         sinks.push(Box::new(PngSink::create(dir)?));
     }
-    let mut writer = match sinks.is_empty() {
-        true => None,
-        false => Some(FrameWriter::start(
-            sinks,
-            FrameWriter::capacity_for(session.welcome.size),
-        )?),
+    let mut writer = if sinks.is_empty() {
+        None
+    } else {
+        let capacity = FrameWriter::capacity_for(session.welcome.size);
+        Some(FrameWriter::start(sinks, capacity, "presentation")?)
     };
     let mut scheduler = Scheduler::new(schedule);
     // A slot is prepared after its vsync and shown at the next one at the
