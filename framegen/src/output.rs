@@ -150,6 +150,21 @@ impl Output {
     }
 }
 
+/// A generated frame in the making on the GPU: the buffers of an
+/// [`Output`], which every pass that writes the frame binds (the warp,
+/// background fill, push-pull, crop, packing, interpolation's passes).
+#[derive(Debug, Clone, Copy)]
+pub struct GpuOutput<'a> {
+    /// `vec4<f32>` color.
+    pub color: &'a wgpu::Buffer,
+    /// `f32` depth.
+    pub depth: &'a wgpu::Buffer,
+    /// `vec2<f32>` motion.
+    pub motion: &'a wgpu::Buffer,
+    /// `u32` mask.
+    pub mask: &'a wgpu::Buffer,
+}
+
 /// One pixel of an [`Output`], by value ([`Output::from_fn`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pixel {

@@ -322,7 +322,7 @@ fn push_pull_matches() {
         let k = ctx.storage_init("k", bytemuck::cast_slice(&out.mask));
         let pyr = ctx.storage("p", pushpull::GpuHoles::pyramid_bytes(layout));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        let o = warp::GpuOutput {
+        let o = framegen::output::GpuOutput {
             color: &c,
             depth: &d,
             motion: &m,
@@ -400,7 +400,7 @@ fn crop_matches() {
             &bufs[0],
             &bufs[1],
             &bufs[2],
-            warp::GpuOutput {
+            framegen::output::GpuOutput {
                 color: &oc,
                 depth: &od,
                 motion: &om,
@@ -502,7 +502,7 @@ fn packing_is_exact() {
     let pm = ctx.storage("pm", mask_bytes);
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     let pool = Pool::default();
-    let o = warp::GpuOutput {
+    let o = framegen::output::GpuOutput {
         color: &bufs[0],
         depth: &bufs[1],
         motion: &bufs[2],

@@ -140,7 +140,7 @@ impl GpuCrop {
         color: &wgpu::Buffer,
         depth: &wgpu::Buffer,
         motion: &wgpu::Buffer,
-        out: crate::passes::gffe::warp::GpuOutput<'_>,
+        out: crate::output::GpuOutput<'_>,
     ) {
         let params = ctx.uniform(bytemuck::bytes_of(&Params {
             sizes: [c.source.0, c.source.1, c.output.0, c.output.1],

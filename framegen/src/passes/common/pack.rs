@@ -180,7 +180,7 @@ impl GpuPack {
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         n: u32,
-        out: crate::passes::gffe::warp::GpuOutput<'_>,
+        out: crate::output::GpuOutput<'_>,
         packed: GpuPacked<'_>,
     ) {
         let params = ctx.uniform(bytemuck::bytes_of(&Params {

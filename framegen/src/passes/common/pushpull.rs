@@ -295,7 +295,7 @@ impl GpuHoles {
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        out: crate::passes::gffe::warp::GpuOutput<'_>,
+        out: crate::output::GpuOutput<'_>,
         pyramid: &wgpu::Buffer,
         layout: Levels,
     ) {

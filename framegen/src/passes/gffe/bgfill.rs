@@ -257,7 +257,7 @@ impl GpuBgFill {
         bg: &wgpu::Buffer,
         keys: &wgpu::Buffer,
         winners: &wgpu::Buffer,
-        out: crate::passes::gffe::warp::GpuOutput<'_>,
+        out: crate::output::GpuOutput<'_>,
         pixels: u32,
     ) {
         self.resolve.dispatch(

@@ -21,7 +21,7 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{CRACK, DisplayMap, EMPTY, Output, Pixel, WARPED};
+use crate::output::{CRACK, DisplayMap, EMPTY, GpuOutput, Output, Pixel, WARPED};
 use crate::passes::common::camera::{PassCamera, cell, pixel_center};
 use crate::passes::common::resample::{self, Resample, Source};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
@@ -171,19 +171,6 @@ pub struct GpuWarp {
     project: Kernel,
     resolve: Kernel,
     cracks: Kernel,
-}
-
-/// The generated frame's buffers on the GPU.
-#[derive(Debug, Clone, Copy)]
-pub struct GpuOutput<'a> {
-    /// `vec4<f32>` color.
-    pub color: &'a wgpu::Buffer,
-    /// `f32` depth.
-    pub depth: &'a wgpu::Buffer,
-    /// `vec2<f32>` motion.
-    pub motion: &'a wgpu::Buffer,
-    /// `u32` mask.
-    pub mask: &'a wgpu::Buffer,
 }
 
 impl GpuWarp {

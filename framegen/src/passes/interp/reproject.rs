@@ -167,7 +167,7 @@ impl GpuReproject {
         depth: &wgpu::Buffer,
         winners: &wgpu::Buffer,
         uv: &wgpu::Buffer,
-        out: crate::passes::gffe::warp::GpuOutput<'_>,
+        out: crate::output::GpuOutput<'_>,
     ) {
         let p = Self::params(ctx, width, height, 0.0);
         let n = u64::from(width) * u64::from(height);

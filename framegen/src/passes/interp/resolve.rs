@@ -163,7 +163,7 @@ impl GpuResolve {
         encoder: &mut wgpu::CommandEncoder,
         ((width, height), alpha, filter): ((u32, u32), f32, Resample),
         (current, previous): (GpuImage<'_>, GpuImage<'_>),
-        out: crate::passes::gffe::warp::GpuOutput<'_>,
+        out: crate::output::GpuOutput<'_>,
     ) {
         let p = ctx.uniform(bytemuck::bytes_of(&Params {
             size: [width, height, filter.code(), 0],
