@@ -399,9 +399,10 @@ impl GpuBackend {
     }
 
     /// Runs `f` inside an error scope named `what`. After an error the
-    /// scratch buffers and the frame being ingested or generated are
-    /// dropped: a buffer the failed work created may be invalid, and kept
-    /// for the next frame it would fail that one too.
+    /// scratch buffers and the work in flight (the frame being ingested or
+    /// generated) are dropped: a buffer the failed work created may be
+    /// invalid, and kept for the next frame it would fail that one too.
+    /// The frames ingested before stay.
     fn scoped<T>(
         &mut self,
         what: &str,
@@ -416,7 +417,6 @@ impl GpuBackend {
             self.rec.encoder = None;
             self.ingest = None;
             self.generation = None;
-            self.spare = None;
         }
         out
     }
