@@ -144,7 +144,7 @@ impl FrameWriter {
         if !self.waited {
             self.waited = true;
             tracing::warn!(
-                "the disk is slower than the frames come: {} waits for the frame writer",
+                "the disk is slower than frames arrive: {} waits for the frame writer",
                 self.waiter
             );
         }

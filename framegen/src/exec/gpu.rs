@@ -30,9 +30,11 @@ use crate::passes::interp::reproject::GpuReproject;
 use crate::passes::interp::resolve::{GpuImage, GpuResolve};
 use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapshot};
 
-/// Bytes a pixel of a rendered frame takes in the upload's staging buffer:
-/// `f16` colour (8), depth (4) and motion (8).
-const UPLOAD_BYTES: u64 = 20;
+/// Bytes of each part of the upload's staging buffer for `n` pixels, in
+/// the order they are written: `f16` colour, depth, motion.
+fn upload_bytes(n: u64) -> [u64; 3] {
+    [n * 8, n * 4, n * 8]
+}
 
 /// Every kernel, compiled once.
 #[derive(Debug)]
@@ -554,8 +556,11 @@ impl Backend for GpuBackend {
         let what = format!("a {}-pixel frame's history (k = {})", n, plan.k);
         self.ctx
             .require_buffer(&what, n * u64::from(plan.k.max(1)) * 16, true)?;
-        self.ctx
-            .require_buffer("the rendered frame's upload", n * UPLOAD_BYTES, false)?;
+        self.ctx.require_buffer(
+            "the rendered frame's upload",
+            upload_bytes(n).iter().sum(),
+            false,
+        )?;
         self.scoped("ingesting a frame", |b| {
             crate::pipeline::ingest(b, frame, plan)
         })
@@ -643,8 +648,8 @@ impl Executor for GpuBackend {
         // The three buffers are written on all cores into one staging
         // buffer kept from frame to frame, and copied from there.
         let n64 = u64::from(n);
-        let [color_bytes, depth_bytes, motion_bytes] = [n64 * 8, n64 * 4, n64 * 8];
-        let total = n64 * UPLOAD_BYTES;
+        let [color_bytes, depth_bytes, motion_bytes] = upload_bytes(n64);
+        let total = color_bytes + depth_bytes + motion_bytes;
         let s = &mut self.scratch;
         if s.upload.as_ref().is_none_or(|b| b.size() < total) {
             s.upload = Some(ctx.upload_staging("rendered frame upload", total));
