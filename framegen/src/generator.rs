@@ -181,7 +181,8 @@ impl FrameGenerator {
             return Ok(frame.clone());
         }
         let p = prepare(frame);
-        let out = crate::passes::common::crop::crop(&p.color, &p.depth, &p.motion, &crop, false);
+        let color = crate::passes::common::widen::widen(&p.color);
+        let out = crate::passes::common::crop::crop(&color, &p.depth, &p.motion, &crop, false);
         let (width, height) = crop.output;
         let meta = FrameMeta {
             camera: Camera {

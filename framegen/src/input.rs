@@ -3,20 +3,22 @@
 //! counted, so no pass ever sees NaN or infinity where it does not expect
 //! one (DESIGN §11: sanitised, counted, never propagated).
 //!
-//! * color: NaN / ±inf channels → 0; the rest is clamped to `[0, 65504]`
-//!   (linear radiance is non-negative, and 65504 is the largest `f16`);
+//! * color: NaN / ±inf channels → 0, negative ones → 0 (linear radiance
+//!   is non-negative), on the `f16` bits, which stay `f16` (every finite
+//!   one is at most 65504);
 //! * depth: `+inf` is kept (sky); NaN, `−inf`, zero and negative depths
 //!   become 0, which every pass reads as "no surface";
 //! * motion: NaN / ±inf components → 0, and vectors are clamped to
 //!   ±4 image sizes (beyond that a point left the image anyway).
 
+use half::f16;
 use protocol::Frame;
 
 /// Largest finite `f16`.
 pub const MAX_RADIANCE: f32 = 65504.0;
 
 /// Pixels per block of the colour conversions between `f16` and `f32`
-/// (here and in the generator's output): large enough for the vector
+/// (the executors' widening and the generator's output): large enough for the vector
 /// instructions and the scheduler, small enough for a block on the stack.
 pub const CONVERT_BLOCK: usize = 1024;
 
@@ -42,11 +44,12 @@ impl Sanitized {
 /// A rendered frame's buffers as the passes read them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prepared {
-    /// Linear RGB, alpha 1. [`prepare`] makes it from the frame's `f16`,
-    /// zeroed or clamped to 65504, so every value is an `f16` and the wgpu
-    /// executor uploads it as one (`passes::common::widen`) without loss;
-    /// a value made by hand that an `f16` cannot hold is rounded there.
-    pub color: Vec<[f32; 4]>,
+    /// Linear RGB, alpha 1, as `f16`: the frame's own values, non-finite
+    /// and negative ones zeroed. Kept as it crosses the wire and the bus:
+    /// the wgpu executor uploads these bytes as they are, and each executor
+    /// widens them to the `f32` its passes read once per frame
+    /// (`passes::common::widen`, exact).
+    pub color: Vec<[f16; 4]>,
     /// Linear depth; 0 = no surface, `+inf` = sky.
     pub depth: Vec<f32>,
     /// Motion to the previous frame, pixels.
@@ -57,6 +60,18 @@ pub struct Prepared {
     pub sanitized: Sanitized,
 }
 
+/// A colour channel as [`prepare`] keeps it, on its `f16` bits: a
+/// non-finite value (all exponent bits set) becomes 0 and is reported
+/// (`false`), a negative one becomes 0, the rest stays (every finite `f16`
+/// is at most [`MAX_RADIANCE`]).
+#[inline]
+fn sanitize_half(v: f16) -> (f16, bool) {
+    let bits = v.to_bits();
+    let finite = bits & 0x7c00 != 0x7c00;
+    let keep = finite & (bits & 0x8000 == 0);
+    (f16::from_bits(if keep { bits } else { 0 }), finite)
+}
+
 /// Converts and sanitises a frame's buffers.
 pub fn prepare(frame: &Frame) -> Prepared {
     use rayon::prelude::*;
@@ -65,33 +80,28 @@ pub fn prepare(frame: &Frame) -> Prepared {
     // own and the (rare) replacements are counted as integers, so the result
     // does not depend on the thread count.
     let [bad_color, bad_depth, bad_motion] = [(); 3].map(|()| AtomicU64::new(0));
-    // Colour in blocks: each block converted with the CPU's f16
-    // instructions in one call (`half`'s slice conversion, exact), then
-    // sanitised in place.
-    let mut color = crate::par::filled([0.0f32; 4], frame.color.len());
+    // Colour on its `f16` bits (no conversion needed to see a non-finite
+    // or negative value), every lane alike (alpha too, then set to 1 and
+    // its count taken back out): uniform lanes vectorise, a 3-of-4 pattern
+    // does not. Counts per block fit a `u32`.
+    let mut color = crate::par::filled([f16::ZERO; 4], frame.color.len());
     color
         .par_chunks_mut(CONVERT_BLOCK)
         .zip(frame.color.par_chunks(CONVERT_BLOCK))
         .for_each(|(out, src)| {
-            use half::slice::HalfFloatSliceExt;
-            src.as_flattened()
-                .convert_to_f32_slice(out.as_flattened_mut());
-            // Non-finite values to 0 and counted, the rest clamped.
-            let mut bad = 0;
-            for c in out.iter_mut() {
-                for v in &mut c[..3] {
-                    let finite = v.is_finite();
-                    bad += u64::from(!finite);
-                    *v = if finite {
-                        v.clamp(0.0, MAX_RADIANCE)
-                    } else {
-                        0.0
-                    };
-                }
-                c[3] = 1.0;
+            let mut bad = 0u32;
+            let lanes = out.as_flattened_mut().iter_mut();
+            for (d, &v) in lanes.zip(src.as_flattened()) {
+                let (h, finite) = sanitize_half(v);
+                bad += u32::from(!finite);
+                *d = h;
+            }
+            for (c, s) in out.iter_mut().zip(src) {
+                bad -= u32::from(!sanitize_half(s[3]).1);
+                c[3] = f16::ONE;
             }
             if bad > 0 {
-                bad_color.fetch_add(bad, Relaxed);
+                bad_color.fetch_add(u64::from(bad), Relaxed);
             }
         });
     let depth: Vec<f32> = frame
@@ -107,22 +117,27 @@ pub fn prepare(frame: &Frame) -> Prepared {
         })
         .collect();
     let limit = 4.0 * frame.meta.size.width.max(frame.meta.size.height) as f32;
-    let motion = frame
-        .motion
-        .par_iter()
-        .map(|m| {
-            // Element by element: `[f32; 2]::map` is not inlined here.
-            let clean = |v: f32| {
-                if v.is_finite() {
-                    v.clamp(-limit, limit)
-                } else {
-                    bad_motion.fetch_add(1, Relaxed);
-                    0.0
-                }
-            };
-            [clean(m[0]), clean(m[1])]
-        })
-        .collect();
+    // Component by component in blocks, with a count per block: a loop the
+    // compiler vectorises (a closure per component was not inlined).
+    let mut motion = crate::par::filled([0.0f32; 2], frame.motion.len());
+    motion
+        .par_chunks_mut(CONVERT_BLOCK)
+        .zip(frame.motion.par_chunks(CONVERT_BLOCK))
+        .for_each(|(out, src)| {
+            let mut bad = 0u32;
+            for (o, &v) in out.as_flattened_mut().iter_mut().zip(src.as_flattened()) {
+                let finite = v.is_finite();
+                bad += u32::from(!finite);
+                // Compares and selects (`min`/`max` carry NaN rules that
+                // keep the loop scalar); NaN fails both and is replaced.
+                let c = if v < -limit { -limit } else { v };
+                let c = if c > limit { limit } else { c };
+                *o = if finite { c } else { 0.0 };
+            }
+            if bad > 0 {
+                bad_motion.fetch_add(u64::from(bad), Relaxed);
+            }
+        });
     let s = Sanitized {
         color: bad_color.into_inner(),
         depth: bad_depth.into_inner(),
@@ -135,5 +150,30 @@ pub fn prepare(frame: &Frame) -> Prepared {
         motion,
         valid,
         sanitized: s,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sanitising on the bits is the documented one on the values, for
+    /// every `f16`: non-finite → 0 and reported, the rest clamped to
+    /// `[0, 65504]`.
+    #[test]
+    fn every_half_is_sanitised_as_its_value_says() {
+        for bits in 0..=u16::MAX {
+            let v = f16::from_bits(bits);
+            let (h, finite) = sanitize_half(v);
+            let x = v.to_f32();
+            let expected = if x.is_finite() {
+                x.clamp(0.0, MAX_RADIANCE)
+            } else {
+                0.0
+            };
+            assert_eq!(finite, x.is_finite(), "{bits:#06x}");
+            assert_eq!(h.to_f32(), expected, "{bits:#06x}");
+            assert!(h.is_sign_positive(), "{bits:#06x}");
+        }
     }
 }

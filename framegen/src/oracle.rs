@@ -50,8 +50,9 @@ pub fn backward_warp(
     same_size(size, truth.meta.size)?;
     let (src, dst) = (prepare(rendered), prepare(truth));
     let (w, h) = (size.width, size.height);
+    let color = crate::passes::common::widen::widen(&src.color);
     let source = Source {
-        color: &src.color,
+        color: &color,
         depth: &src.depth,
         size: (w, h),
     };

@@ -92,6 +92,8 @@ fn recycled_buffers_leave_no_trace() {
     let frames = framegen::decimate::decimate(&all, 2);
     let (a, b) = (&frames[0], &frames[1]);
     let (pa, mut pb) = (framegen::input::prepare(a), framegen::input::prepare(b));
+    let widen = framegen::passes::common::widen::widen;
+    let (ca, cb) = (widen(&pa.color), widen(&pb.color));
     // Some pixels without a surface: they write "no position" entries.
     pb.depth.iter_mut().step_by(97).for_each(|d| *d = 0.0);
     let n = pb.depth.len();
@@ -103,7 +105,7 @@ fn recycled_buffers_leave_no_trace() {
     let seeds_a = Seeds {
         p0: &hist_a.positions[..n],
         track: &hist_a.track,
-        color: &pa.color,
+        color: &ca,
     };
     let bg_a = background::collect(Vec::new(), &cam_a, seeds_a, levels, None, tol);
     let origin = b.meta.camera.pose.position;
@@ -160,7 +162,7 @@ fn recycled_buffers_leave_no_trace() {
     let seeds_b = Seeds {
         p0: &fresh.positions[..n],
         track: &fresh.track,
-        color: &pb.color,
+        color: &cb,
     };
     let prev_bg = PrevBackground {
         camera: prev_cam,

@@ -305,7 +305,7 @@ fn push_pull_matches() {
         let (x, y) = (t as u32 % SIZE.width, t as u32 / SIZE.width);
         let hole = ((x / 8 + y / 8) % 3 == 0) || (x > 70 && y > 20);
         if !hole {
-            out.color[t] = p.color[t];
+            out.color[t] = p.color[t].map(half::f16::to_f32);
             out.depth[t] = p.depth[t].max(1e-3);
             out.motion[t] = [x as f32 * 0.01, -1.0];
             out.mask[t] = framegen::output::WARPED;
@@ -354,6 +354,7 @@ fn crop_matches() {
     let gc = crop::GpuCrop::new(&ctx);
     let fs = frames("pan", 30, 1);
     let p = framegen::input::prepare(&fs[0]);
+    let color = widen::widen(&p.color);
     for (origin, extent, output) in [
         (
             glam::Vec2::new(0.0, 0.0),
@@ -377,10 +378,10 @@ fn crop_matches() {
             extent,
             output,
         };
-        let cpu = crop::crop(&p.color, &p.depth, &p.motion, &c, false);
+        let cpu = crop::crop(&color, &p.depth, &p.motion, &c, false);
         let n = cpu.mask.len();
         let bufs: Vec<_> = [
-            bytemuck::cast_slice::<_, u8>(&p.color).to_vec(),
+            bytemuck::cast_slice::<_, u8>(&color).to_vec(),
             bytemuck::cast_slice::<_, u8>(&p.depth).to_vec(),
             bytemuck::cast_slice::<_, u8>(&p.motion).to_vec(),
         ]

@@ -13,7 +13,7 @@ use crate::output::Output;
 use crate::passes::common::levels::Levels;
 use crate::passes::common::resample::{Resample, Source};
 use crate::passes::common::splat;
-use crate::passes::common::{crop, pushpull};
+use crate::passes::common::{crop, pushpull, widen};
 use crate::passes::gffe::{background, bgfill, history, motion, shading, warp};
 use crate::passes::interp::{reproject, resolve};
 use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapshot};
@@ -23,6 +23,9 @@ use crate::pipeline::{Backend, Executor, IngestPlan, Job, Pass, PassTime, Snapsh
 struct FrameState {
     camera: crate::passes::common::camera::PassCamera,
     frame: Arc<Prepared>,
+    /// The frame's colour widened to the `f32` the passes read (its upload,
+    /// `widen`).
+    color: Vec<[f32; 4]>,
     history: history::History,
     k: u32,
     levels: Levels,
@@ -131,7 +134,7 @@ fn ingesting(ingest: &mut Option<Ingest>) -> Result<&mut Ingest, FramegenError> 
 /// A frame's colour and depth, as interpolation's resolve reads them.
 fn image(s: &FrameState) -> Source<'_> {
     Source {
-        color: &s.frame.color,
+        color: &s.color,
         depth: &s.frame.depth,
         size: (s.camera.width(), s.camera.height()),
     }
@@ -161,10 +164,15 @@ impl Executor for CpuBackend {
             Some(camera) => self.current.take().map(|p| (camera, p)),
             None => None,
         };
+        let mut spare = self.previous.take();
+        // Into the colour buffer of the frame before the previous one.
+        let reuse = spare.as_mut().map(|s| std::mem::take(&mut s.color));
+        let color = widen::widen_into(&frame.color, reuse.unwrap_or_default());
         self.ingest = Some(Ingest {
             state: FrameState {
                 camera: plan.camera,
                 frame: frame.clone(),
+                color,
                 // k = 0 (repeat): nothing tracked, nothing collected.
                 history: history::History::empty(),
                 k: plan.k,
@@ -175,7 +183,7 @@ impl Executor for CpuBackend {
                 luma: Vec::new(),
             },
             prev,
-            spare: self.previous.take(),
+            spare,
             follows: plan.follows,
         });
         Ok(())
@@ -222,7 +230,7 @@ impl Executor for CpuBackend {
                 texels: &p.background,
             });
         let n = i.state.frame.depth.len();
-        let (h, color) = (&i.state.history, &i.state.frame.color);
+        let (h, color) = (&i.state.history, &i.state.color);
         let reuse = i
             .spare
             .as_mut()
@@ -264,14 +272,14 @@ impl Executor for CpuBackend {
         };
         timed(&mut self.timings, Pass::Shading, || {
             let cur = shading::Current {
-                color: &f.color,
+                color: &s.color,
                 depth: &f.depth,
                 motion: &f.motion,
                 track: &s.history.track,
                 size,
             };
             let prev = shading::Previous {
-                color: &p.frame.color,
+                color: &p.color,
                 depth: &p.frame.depth,
                 ratio: &p.ratio,
                 luma: &p.luma,
@@ -318,7 +326,7 @@ impl Executor for CpuBackend {
         let (cur, out, t) = self.parts()?;
         let f = &cur.frame;
         let o = timed(t, Pass::Crop, || {
-            crop::crop(&f.color, &f.depth, &f.motion, c, still)
+            crop::crop(&cur.color, &f.depth, &f.motion, c, still)
         });
         *out = Some(o);
         Ok(())
@@ -330,11 +338,10 @@ impl Executor for CpuBackend {
             // No estimate (first frame, gap): the rendered colour as it is.
             return Ok(());
         }
-        let f = &cur.frame;
         let mut shaded = std::mem::take(&mut self.shaded_buffer);
         let changed = timed(&mut self.timings, Pass::Shade, || {
             let e = shading::Estimate {
-                color: &f.color,
+                color: &cur.color,
                 track: &cur.history.track,
                 ratio: &cur.ratio,
                 flow: &cur.flow,
@@ -394,7 +401,7 @@ impl Executor for CpuBackend {
             });
             let f = &cur.frame;
             let source = Source {
-                color: shaded.as_deref().unwrap_or(&f.color),
+                color: shaded.as_deref().unwrap_or(&cur.color),
                 depth: &f.depth,
                 size: (cur.camera.width(), cur.camera.height()),
             };

@@ -19,7 +19,7 @@ use crate::passes::common::levels::Levels;
 use crate::passes::common::pack::{self, GpuPack, GpuPacked, Packed};
 use crate::passes::common::pushpull::{self, GpuHoles};
 use crate::passes::common::splat::GpuSplat;
-use crate::passes::common::widen::{self, GpuWiden};
+use crate::passes::common::widen::GpuWiden;
 use crate::passes::gffe::background::{GpuBackground, Texel as BgTexel};
 use crate::passes::gffe::bgfill::GpuBgFill;
 use crate::passes::gffe::history::{GpuHistory, GpuHistoryBuffers};
@@ -644,7 +644,8 @@ impl Executor for GpuBackend {
         };
         buffers.camera = plan.camera;
         buffers.has_ratio = false;
-        // Colour crosses as f16 and is widened on the device (`widen`).
+        // Colour crosses as the f16 it arrived in and is widened on the
+        // device (`widen`).
         // The three buffers are written on all cores into one staging
         // buffer kept from frame to frame, and copied from there.
         let n64 = u64::from(n);
@@ -658,7 +659,7 @@ impl Executor for GpuBackend {
         ctx.map_write(staging, total, |view| {
             let (color, rest) = view.split_at(color_bytes as usize);
             let (depth, motion) = rest.split_at(depth_bytes as usize);
-            widen::narrow_into(&frame.color, color);
+            crate::gpu::par_write(bytemuck::cast_slice(&frame.color), color);
             crate::gpu::par_write(bytemuck::cast_slice(&frame.depth), depth);
             crate::gpu::par_write(bytemuck::cast_slice(&frame.motion), motion);
         })?;

@@ -62,19 +62,48 @@ pub fn crop(
 ) -> Output {
     let (w, h) = c.source;
     if c.is_identity() {
-        // Pixel centres map to pixel centres: the bilinear weights are
-        // (1, 0) and the scale 1, so this is the gather below, exactly.
-        return Output::from_fn(w, h, |t| {
-            let rgb = color[t];
-            Pixel {
-                color: [rgb[0], rgb[1], rgb[2], 1.0],
-                depth: depth[t],
-                motion: if still { [0.0; 2] } else { motion[t] },
-                mask: COPIED,
-            }
-        });
+        return copy(color, depth, motion, (w, h), still);
     }
     gather(color, depth, motion, c, still)
+}
+
+/// The identity crop: pixel centres map to pixel centres, so the bilinear
+/// weights are (1, 0) and the scale 1, and this is [`gather`], exactly.
+/// Each buffer is copied whole (colour in blocks, its alpha set to 1 while
+/// the block is in cache), not pixel by pixel through four buffers at
+/// once.
+fn copy(
+    color: &[[f32; 4]],
+    depth: &[f32],
+    motion: &[[f32; 2]],
+    (width, height): (u32, u32),
+    still: bool,
+) -> Output {
+    use rayon::prelude::*;
+    let n = width as usize * height as usize;
+    let (color, depth, motion) = (&color[..n], &depth[..n], &motion[..n]);
+    let band = crate::par::band(width as usize, n);
+    let mut rgb = crate::par::filled([0.0f32; 4], n);
+    rgb.par_chunks_mut(band)
+        .zip(color.par_chunks(band))
+        .for_each(|(dst, src)| {
+            dst.copy_from_slice(src);
+            for c in dst {
+                c[3] = 1.0;
+            }
+        });
+    Output {
+        width,
+        height,
+        color: rgb,
+        depth: depth.to_vec(),
+        motion: if still {
+            crate::par::filled([0.0; 2], n)
+        } else {
+            motion.to_vec()
+        },
+        mask: crate::par::filled(COPIED, n),
+    }
 }
 
 /// The general crop: bilinear colour, nearest depth and motion.

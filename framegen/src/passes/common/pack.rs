@@ -38,6 +38,7 @@ pub struct Packed {
 
 /// A colour channel as the packed frame keeps it (before the rounding to
 /// `f16`): non-finite and non-positive values (`-0` too) become `+0`.
+#[inline]
 pub fn radiance(v: f32) -> f32 {
     if v.is_finite() && v > 0.0 {
         v.min(MAX_RADIANCE)
@@ -57,14 +58,18 @@ pub fn pack(out: &Output) -> Packed {
         .par_chunks_mut(CONVERT_BLOCK)
         .zip(out.color.par_chunks(CONVERT_BLOCK))
         .for_each(|(dst, src)| {
+            // Lane by lane, then alpha: loops the compiler vectorises.
             let mut clean = [[0.0f32; 4]; CONVERT_BLOCK];
-            for (c, s) in clean.iter_mut().zip(src) {
-                *c = [radiance(s[0]), radiance(s[1]), radiance(s[2]), 1.0];
+            let lanes = clean.as_flattened_mut().iter_mut();
+            for (c, &s) in lanes.zip(src.as_flattened()) {
+                *c = radiance(s);
+            }
+            for c in &mut clean {
+                c[3] = 1.0;
             }
             dst.as_flattened_mut()
                 .convert_from_f32_slice(clean[..src.len()].as_flattened());
         });
-    let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
     Packed {
         width: out.width,
         height: out.height,
@@ -75,11 +80,21 @@ pub fn pack(out: &Output) -> Packed {
             .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
             .collect(),
         // Element by element: `[f32; 2]::map` is not inlined here.
-        motion: out
-            .motion
-            .par_iter()
-            .map(|m| [finite(m[0]), finite(m[1])])
-            .collect(),
+        motion: {
+            // In blocks, component by component (a closure per component
+            // was not inlined).
+            let mut motion = crate::par::filled([0.0f32; 2], out.motion.len());
+            motion
+                .par_chunks_mut(CONVERT_BLOCK)
+                .zip(out.motion.par_chunks(CONVERT_BLOCK))
+                .for_each(|(dst, src)| {
+                    let lanes = dst.as_flattened_mut().iter_mut();
+                    for (d, &v) in lanes.zip(src.as_flattened()) {
+                        *d = if v.is_finite() { v } else { 0.0 };
+                    }
+                });
+            motion
+        },
         mask: out
             .mask
             .par_iter()

@@ -1,49 +1,43 @@
 //! The rendered frame's colour crosses the bus as `f16` (8 bytes a pixel
 //! where the passes read 16) and is widened to `f32` on the device, part
 //! of the wgpu executor's upload: a rendered frame then crosses in 20 bytes
-//! a pixel (colour 8, depth 4, motion 8) instead of 28.
+//! a pixel (colour 8, depth 4, motion 8) instead of 28. The CPU executor's
+//! upload widens it on the host ([`widen_into`]).
 //!
-//! Nothing is lost: the sanitised colour ([`crate::input::prepare`]) came
-//! from the frame's own `f16` and was only zeroed or clamped to 0 and
-//! 65504, both `f16` values, so [`narrow`] is exact on it and the kernel
-//! gives back the same `f32`, bit for bit (it decodes the bits itself,
-//! subnormals included, where WGSL's `unpack2x16float` may flush them).
-//! [`widen`] is the CPU reference.
+//! The `f16` is the frame's own, sanitised on its bits
+//! ([`crate::input::prepare`]): the host converts nothing on the way to the
+//! device, and the kernel gives back the `f32` of each `f16` exactly, bit
+//! for bit as the host would (it decodes the bits itself, subnormals
+//! included, where WGSL's `unpack2x16float` may flush them). [`widen`] is
+//! the CPU reference.
 
 use half::f16;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::input::CONVERT_BLOCK;
 
-/// `f32` colour as `f16` bytes (8 a pixel) into `out`, on all cores, in
-/// blocks converted with the CPU's `f16` instructions (rounding to nearest;
-/// exact on sanitised colour).
-pub fn narrow_into(color: &[[f32; 4]], out: wgpu::WriteOnly<'_, [u8]>) {
-    use rayon::prelude::*;
-    const BYTES: usize = CONVERT_BLOCK * 8;
-    let (pieces, rest) = crate::gpu::write_pieces::<BYTES>(out);
-    let whole = pieces.len() * CONVERT_BLOCK;
-    pieces
-        .into_par_iter()
-        .zip(color[..whole].par_chunks_exact(CONVERT_BLOCK))
-        .for_each(|(dst, src)| convert(src, dst.into()));
-    convert(&color[whole..], rest);
-}
-
-/// One block of [`narrow_into`].
-fn convert(src: &[[f32; 4]], mut dst: wgpu::WriteOnly<'_, [u8]>) {
-    use half::slice::HalfFloatSliceExt;
-    let mut block = [[f16::ZERO; 4]; CONVERT_BLOCK];
-    let block = &mut block[..src.len()];
-    block
-        .as_flattened_mut()
-        .convert_from_f32_slice(src.as_flattened());
-    dst.copy_from_slice(bytemuck::cast_slice(block));
-}
-
-/// CPU reference of `widen`: `f16` colour as `f32`.
+/// CPU reference of `widen`: `f16` colour as `f32`, exact.
 pub fn widen(color: &[[f16; 4]]) -> Vec<[f32; 4]> {
-    color.iter().map(|c| c.map(f16::to_f32)).collect()
+    widen_into(color, Vec::new())
+}
+
+/// [`widen`] into `reuse` (resized to fit; every element is written), on
+/// all cores, in blocks converted with the CPU's `f16` instructions
+/// (`half`'s slice conversion).
+pub fn widen_into(color: &[[f16; 4]], reuse: Vec<[f32; 4]>) -> Vec<[f32; 4]> {
+    use half::slice::HalfFloatSliceExt;
+    use rayon::prelude::*;
+    let mut out = reuse;
+    if out.len() != color.len() {
+        out = crate::par::filled([0.0; 4], color.len());
+    }
+    out.par_chunks_mut(CONVERT_BLOCK)
+        .zip(color.par_chunks(CONVERT_BLOCK))
+        .for_each(|(dst, src)| {
+            src.as_flattened()
+                .convert_to_f32_slice(dst.as_flattened_mut())
+        });
+    out
 }
 
 #[repr(C)]
@@ -95,29 +89,23 @@ impl GpuWiden {
 mod tests {
     use super::*;
 
-    /// [`narrow_into`] a vector.
-    fn narrow(color: &[[f32; 4]]) -> Vec<[f16; 4]> {
-        let mut out = vec![[f16::ZERO; 4]; color.len()];
-        narrow_into(
-            color,
-            bytemuck::cast_slice_mut::<_, u8>(&mut out[..]).into(),
-        );
-        out
-    }
-
+    /// Every `f16`, in whole blocks and a last partial one, into a reused
+    /// buffer of another size: each value its own `f32`, bit for bit.
     #[test]
-    fn narrowing_sanitised_colour_is_exact() {
-        // Every finite, non-negative f16 (what sanitising leaves), as f32.
-        let all: Vec<[f32; 4]> = (0..0x7c00u16)
+    fn widening_is_exact_for_every_half() {
+        let all: Vec<[f16; 4]> = (0..=u16::MAX)
             .map(|b| {
-                let v = f16::from_bits(b).to_f32();
-                [v, 0.0, 65504.0, 1.0]
+                let v = f16::from_bits(b);
+                [v, f16::from_bits(!b), f16::MAX, f16::ONE]
             })
-            // A last, partial block.
-            .chain([[1.5, 2.0, 3.0, 1.0]])
+            .chain([[f16::from_f32(1.5); 4]])
             .collect();
-        let half = narrow(&all);
-        assert_eq!(widen(&half), all);
-        assert_eq!(half[0x3c00][0], f16::ONE);
+        let wide = widen_into(&all, vec![[7.0; 4]; 3]);
+        assert_eq!(wide.len(), all.len());
+        // NaN payloads aside (sanitised colour holds none).
+        let bits = |v: f32| if v.is_nan() { u32::MAX } else { v.to_bits() };
+        for (w, h) in wide.iter().zip(&all) {
+            assert_eq!(w.map(bits), h.map(|v| bits(v.to_f32())));
+        }
     }
 }
