@@ -6,6 +6,9 @@
 //! at the display rate. "Present" is the first vsync at or after the slot's
 //! image was finished (submitted); each slot is decided at its vsync and
 //! shown at the next one, as a swap chain with one frame of queue would.
+//! An image finished after that vsync is shown at the first one after it:
+//! the vsync it missed counts as missed, and the slot of the vsync it took
+//! is not made (each vsync shows at most one image).
 //! Presented frames can be written as display-encoded PNGs and as a dump,
 //! on a thread of their own ([`crate::frame_writer`]).
 //!
@@ -424,6 +427,8 @@ pub async fn run_headless(
                 kept.pop_front();
             }
         }
+        // The vsync this slot's image was shown at, if it was shown.
+        let mut shown_at = None;
         if let Some(slot) = scheduler.vsync(vsync) {
             if let (SlotKind::Interpolated, Some(next)) = (slot.kind, slot.next) {
                 let due = kept.iter().filter(|f| f.meta.index <= next.id);
@@ -508,6 +513,7 @@ pub async fn run_headless(
             }
             let done = clock();
             let present_at = accounting.first_vsync_after(done.max(vsync + di));
+            shown_at = Some(present_at);
             let ingested = pusher.ingested_at(slot.source.id);
             accounting.record(
                 &slot,
@@ -531,8 +537,14 @@ pub async fn run_headless(
                 writer.write(shown)?;
             }
         }
-        // Skip vsyncs that passed while this slot was prepared.
-        let next = ((clock().as_secs_f64() / di.as_secs_f64()).floor() as u64).max(k + 1);
+        // Skip vsyncs that passed while this slot was prepared, and the
+        // slot of the vsync a late image took (its own vsync passed without
+        // a new image: missed; a slot for the next one would be a second
+        // image for one vsync).
+        let taken = shown_at.map_or(0, |t| (t.as_secs_f64() / di.as_secs_f64()).round() as u64);
+        let next = ((clock().as_secs_f64() / di.as_secs_f64()).floor() as u64)
+            .max(k + 1)
+            .max(taken);
         missed += next.min(last + 1) - k - 1;
         k = next;
     }
