@@ -18,8 +18,9 @@ use protocol::Frame;
 pub const MAX_RADIANCE: f32 = 65504.0;
 
 /// Pixels per block of the colour conversions between `f16` and `f32`
-/// (the executors' widening and the generator's output): large enough for the vector
-/// instructions and the scheduler, small enough for a block on the stack.
+/// (the executors' widening and the generator's output): large enough for
+/// the vector instructions and the scheduler, small enough for a block on
+/// the stack.
 pub const CONVERT_BLOCK: usize = 1024;
 
 /// How many values of each buffer were replaced.

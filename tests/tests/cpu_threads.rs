@@ -42,15 +42,26 @@ fn run(threads: usize, method: Method, frames: &[Frame]) -> Vec<(String, Vec<u32
                 &[0.5, 2.0]
             };
             for &alpha in alphas {
-                let out = g
-                    .generate(alpha)
-                    .unwrap()
-                    .output
-                    .expect("the CPU keeps its output");
-                let mut bits: Vec<u32> = out.color.iter().flatten().map(|v| v.to_bits()).collect();
-                bits.extend(out.depth.iter().map(|v| v.to_bits()));
-                bits.extend(out.motion.iter().flatten().map(|v| v.to_bits()));
-                bits.extend(&out.mask);
+                let generated = g.generate(alpha).unwrap();
+                // The packed frame, and the passes' f32 frame where the CPU
+                // keeps it (all but repeat's still copy, made packed).
+                let f = &generated.frame;
+                let mut bits: Vec<u32> = f
+                    .color
+                    .iter()
+                    .flatten()
+                    .map(|v| v.to_bits().into())
+                    .collect();
+                bits.extend(f.depth.iter().map(|v| v.to_bits()));
+                bits.extend(f.motion.iter().flatten().map(|v| v.to_bits()));
+                bits.extend(generated.mask.iter().map(|&m| m as u32));
+                assert_eq!(generated.output.is_none(), method == Method::Repeat);
+                if let Some(out) = &generated.output {
+                    bits.extend(out.color.iter().flatten().map(|v| v.to_bits()));
+                    bits.extend(out.depth.iter().map(|v| v.to_bits()));
+                    bits.extend(out.motion.iter().flatten().map(|v| v.to_bits()));
+                    bits.extend(&out.mask);
+                }
                 seen.push((format!("generate α={alpha}"), bits));
             }
         }

@@ -11,6 +11,7 @@ use crate::FramegenError;
 use crate::input::Prepared;
 use crate::output::Output;
 use crate::passes::common::levels::Levels;
+use crate::passes::common::pack::Packed;
 use crate::passes::common::resample::{Resample, Source};
 use crate::passes::common::splat;
 use crate::passes::common::{crop, pushpull, widen};
@@ -24,7 +25,8 @@ struct FrameState {
     camera: crate::passes::common::camera::PassCamera,
     frame: Arc<Prepared>,
     /// The frame's colour widened to the `f32` the passes read (its upload,
-    /// `widen`).
+    /// `widen`); empty until a pass needs it where nothing is tracked
+    /// (`repeat`, whose still copy packs the `f16` as it is).
     color: Vec<[f32; 4]>,
     history: history::History,
     k: u32,
@@ -67,6 +69,9 @@ pub struct CpuBackend {
     ingest: Option<Ingest>,
     /// The generated frame being made.
     out: Option<Output>,
+    /// Or, made by `repeat`'s still copy of the whole frame, the packed
+    /// frame itself, with the crop it is (`crop::still_packed`).
+    copied: Option<(crop::Crop, Packed)>,
     /// GFFE's α, between `motion` and `warp`: eq. 1 is evaluated per
     /// pixel inside the warp's projection, so no frame of positions at α
     /// is stored.
@@ -100,6 +105,18 @@ impl Backend for CpuBackend {
 
     fn generate(&mut self, job: &Job) -> Result<Output, FramegenError> {
         crate::pipeline::generate(self, job)
+    }
+
+    /// Packs the `f32` frame the passes made, which it hands over too; a
+    /// still copy made packed is handed over as it is, without an `f32`
+    /// frame.
+    fn generate_packed(&mut self, job: &Job) -> Result<(Packed, Option<Output>), FramegenError> {
+        crate::pipeline::passes(self, job)?;
+        if let Some((_, packed)) = self.copied.take() {
+            return Ok((packed, None));
+        }
+        let out = self.finish()?;
+        Ok((crate::passes::common::pack::pack(&out), Some(out)))
     }
 
     fn reset(&mut self) {
@@ -141,6 +158,16 @@ fn image(s: &FrameState) -> Source<'_> {
 }
 
 impl CpuBackend {
+    /// Widens the current frame's colour where its upload left it
+    /// unwidened (nothing tracked).
+    fn widened(&mut self) -> Result<(), FramegenError> {
+        let cur = self.current.as_mut().ok_or(FramegenError::NoFrame)?;
+        if cur.color.len() != cur.frame.color.len() {
+            cur.color = widen::widen_into(&cur.frame.color, std::mem::take(&mut cur.color));
+        }
+        Ok(())
+    }
+
     /// The ingested frame, the output being made and the timings.
     fn parts(
         &mut self,
@@ -165,9 +192,13 @@ impl Executor for CpuBackend {
             None => None,
         };
         let mut spare = self.previous.take();
-        // Into the colour buffer of the frame before the previous one.
+        // Into the colour buffer of the frame before the previous one; a
+        // frame nothing tracks is widened only if a crop needs it.
         let reuse = spare.as_mut().map(|s| std::mem::take(&mut s.color));
-        let color = widen::widen_into(&frame.color, reuse.unwrap_or_default());
+        let color = match plan.k {
+            0 => Vec::new(),
+            _ => widen::widen_into(&frame.color, reuse.unwrap_or_default()),
+        };
         self.ingest = Some(Ingest {
             state: FrameState {
                 camera: plan.camera,
@@ -310,6 +341,7 @@ impl Executor for CpuBackend {
         self.timings
             .retain(|p| matches!(p.pass, Pass::History | Pass::Background | Pass::Shading));
         self.out = None;
+        self.copied = None;
         if let Some(buffer) = self.shaded.take() {
             self.shaded_buffer = buffer;
         }
@@ -322,7 +354,19 @@ impl Executor for CpuBackend {
             && matches!((&self.current, &self.previous), (Some(c), Some(p)) if len(c) == len(p))
     }
 
+    /// The still copy of the whole frame (`repeat`) is packed at once from
+    /// the prepared frame (`crop::still_packed`, the crop and the packing
+    /// fused); any other crop resamples the widened colour.
     fn crop(&mut self, c: &crop::Crop, still: bool) -> Result<(), FramegenError> {
+        if still && c.is_identity() {
+            let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+            let packed = timed(&mut self.timings, Pass::Crop, || {
+                crop::still_packed(&cur.frame, c.source)
+            });
+            self.copied = Some((*c, packed));
+            return Ok(());
+        }
+        self.widened()?;
         let (cur, out, t) = self.parts()?;
         let f = &cur.frame;
         let o = timed(t, Pass::Crop, || {
@@ -490,7 +534,15 @@ impl Executor for CpuBackend {
         Ok(())
     }
 
+    /// The `f32` frame; for a still copy made packed, the crop it stands
+    /// for, made now (this API's callers, pass-level tests, want it).
     fn finish(&mut self) -> Result<Output, FramegenError> {
+        if let Some((c, _)) = self.copied.take() {
+            self.widened()?;
+            let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+            let f = &cur.frame;
+            return Ok(crop::crop(&cur.color, &f.depth, &f.motion, &c, true));
+        }
         self.out
             .take()
             .ok_or(FramegenError::PassOrder("no generated frame was made"))

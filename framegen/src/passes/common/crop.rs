@@ -12,8 +12,10 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{COPIED, Output, Pixel};
+use crate::input::Prepared;
+use crate::output::{COPIED, Output, Pixel, PixelSource};
 use crate::passes::common::camera::pixel_center;
+use crate::passes::common::pack::Packed;
 use crate::passes::common::sample::{bilinear, clamp_index};
 
 /// Where the displayed region lies in the rendered image.
@@ -65,6 +67,29 @@ pub fn crop(
         return copy(color, depth, motion, (w, h), still);
     }
     gather(color, depth, motion, c, still)
+}
+
+/// The identity crop of a still frame, packed for the host: [`crop`]
+/// (identity, `still`) and `pack::pack` fused, reading the prepared frame
+/// as it is (`repeat` on the CPU). Its colour is already the sanitised
+/// `f16` with alpha 1 that packing the widened copy would give back; depth
+/// keeps a surface's and sends "no surface" to `+inf`, as packing does;
+/// motion is zero and every pixel copied. No `f32` frame is made.
+pub fn still_packed(frame: &Prepared, (width, height): (u32, u32)) -> Packed {
+    use rayon::prelude::*;
+    // Copies and fills (`memcpy`, `memset`), no buffer written twice.
+    let n = width as usize * height as usize;
+    Packed {
+        width,
+        height,
+        color: frame.color[..n].to_vec(),
+        depth: frame.depth[..n]
+            .par_iter()
+            .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
+            .collect(),
+        motion: vec![[0.0; 2]; n],
+        mask: vec![PixelSource::Copied; n],
+    }
 }
 
 /// The identity crop: pixel centres map to pixel centres, so the bilinear
@@ -189,6 +214,56 @@ impl GpuCrop {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fused crop and pack of `repeat` is the crop of the widened
+    /// colour, packed, bit for bit, on a frame with every special value the
+    /// input sanitising meets (NaN, ±inf, negatives, −0, subnormals, the
+    /// largest `f16`; no surface, sky, NaN depth; non-finite motion).
+    #[test]
+    fn the_packed_still_copy_is_the_crop_packed() {
+        use crate::passes::common::{pack, widen};
+        use half::f16;
+        let size = protocol::FrameSize::new(29, 11);
+        let (w, h) = (size.width, size.height);
+        let mut frame = crate::testutil::frame(3, size);
+        let specials = [
+            f16::NAN,
+            f16::INFINITY,
+            f16::NEG_INFINITY,
+            f16::from_f32(-2.5),
+            f16::NEG_ZERO,
+            f16::from_bits(1),
+            f16::MAX,
+            f16::from_f32(0.75),
+        ];
+        for (i, c) in frame.color.iter_mut().enumerate() {
+            *c = [0, 3, 5, 7].map(|k| specials[(i + k) % specials.len()]);
+        }
+        let depths = [0.0, f32::INFINITY, f32::NAN, -1.0, 2.5, f32::NEG_INFINITY];
+        for (i, d) in frame.depth.iter_mut().enumerate() {
+            *d = depths[i % depths.len()];
+        }
+        for (i, m) in frame.motion.iter_mut().enumerate() {
+            *m = [f32::NAN, i as f32 - 9.5];
+        }
+        let p = crate::input::prepare(&frame);
+        let c = Crop {
+            source: (w, h),
+            origin: Vec2::ZERO,
+            extent: Vec2::new(w as f32, h as f32),
+            output: (w, h),
+        };
+        let color = widen::widen(&p.color);
+        let reference = pack::pack(&crop(&color, &p.depth, &p.motion, &c, true));
+        let fused = still_packed(&p, (w, h));
+        let bits = |q: &Packed| {
+            let color: Vec<u16> = q.color.iter().flatten().map(|v| v.to_bits()).collect();
+            let depth: Vec<u32> = q.depth.iter().map(|v| v.to_bits()).collect();
+            let motion: Vec<u32> = q.motion.iter().flatten().map(|v| v.to_bits()).collect();
+            (color, depth, motion, q.mask.clone(), (q.width, q.height))
+        };
+        assert_eq!(bits(&fused), bits(&reference));
+    }
 
     #[test]
     fn the_identity_crop_is_the_gather_exactly() {
