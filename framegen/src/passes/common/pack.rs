@@ -79,7 +79,6 @@ pub fn pack(out: &Output) -> Packed {
             .par_iter()
             .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
             .collect(),
-        // Element by element: `[f32; 2]::map` is not inlined here.
         motion: {
             // In blocks, component by component (a closure per component
             // was not inlined).
