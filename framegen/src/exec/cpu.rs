@@ -10,6 +10,7 @@ use std::time::Instant;
 use crate::FramegenError;
 use crate::input::Prepared;
 use crate::output::Output;
+use crate::passes::common::lanes::LANES;
 use crate::passes::common::levels::Levels;
 use crate::passes::common::pack::Packed;
 use crate::passes::common::resample::{Resample, Source};
@@ -434,14 +435,29 @@ impl Executor for CpuBackend {
             // Each landing position is kept where it is made (its own
             // element, written once, read only for winners).
             let landings = &*landings;
-            let winners = splat::resolve_with(track.len(), 0..(w * h) as usize, |x| {
-                let p = motion::estimate_at(positions, track, cur.k, x, alpha);
-                let (candidate, pixel) = warp::candidate_at(p, &job.target);
-                if filtered && candidate.slot != splat::NONE {
-                    let bits = u64::from(pixel.x.to_bits()) << 32 | u64::from(pixel.y.to_bits());
-                    landings[x].store(bits, Relaxed);
-                }
-                candidate
+            let zt0 = Instant::now();
+            let n = track.len();
+            // Four at a time, projected in lanes; the last few alone.
+            let winners = splat::resolve_lanes(n, 0..(w * h) as usize, |first| {
+                let at = |x: usize| motion::estimate_at(positions, track, cur.k, x, alpha);
+                let landed: [(splat::Candidate, glam::Vec2); LANES] = match first + LANES <= n {
+                    true => {
+                        warp::candidates_at4(&std::array::from_fn(|l| at(first + l)), &job.target)
+                    }
+                    false => std::array::from_fn(|l| match first + l < n {
+                        true => warp::candidate_at(at(first + l), &job.target),
+                        false => (splat::Candidate::MISS, glam::Vec2::ZERO),
+                    }),
+                };
+                std::array::from_fn(|l| {
+                    let (candidate, pixel) = landed[l];
+                    if filtered && candidate.slot != splat::NONE {
+                        let bits =
+                            u64::from(pixel.x.to_bits()) << 32 | u64::from(pixel.y.to_bits());
+                        landings[first + l].store(bits, Relaxed);
+                    }
+                    candidate
+                })
             });
             let f = &cur.frame;
             let source = Source {
@@ -461,8 +477,18 @@ impl Executor for CpuBackend {
                 filter: job.resample,
                 size: (w, h),
             };
+            let zt1 = Instant::now();
             let mut out = warp::resolve(&winners, source, landing, how);
+            let zt2 = Instant::now();
             warp::close_cracks(&mut out);
+            if std::env::var_os("ZZ").is_some() {
+                eprintln!(
+                    "ZZ {:.3} {:.3} {:.3}",
+                    (zt1 - zt0).as_secs_f64() * 1e3,
+                    (zt2 - zt1).as_secs_f64() * 1e3,
+                    zt2.elapsed().as_secs_f64() * 1e3
+                );
+            }
             out
         });
         if let Some(buffer) = shaded {

@@ -19,6 +19,7 @@
 //! exactly from the same candidates.
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
+use crate::passes::common::lanes::LANES;
 
 /// "No slot" / "no winner".
 pub const NONE: u32 = u32::MAX;
@@ -122,6 +123,23 @@ pub fn resolve_with(
     range: std::ops::Range<usize>,
     candidate: impl Fn(usize) -> Candidate + Sync,
 ) -> Winners {
+    resolve_lanes(count, range, |i| {
+        std::array::from_fn(|l| match i + l < count {
+            true => candidate(i + l),
+            false => Candidate::MISS,
+        })
+    })
+}
+
+/// [`resolve_with`] with the candidates made [`LANES`] at a time:
+/// `candidates(i)` gives those of elements `i .. i + LANES` (`i` a multiple
+/// of `LANES`), for a pass that projects four at once (`lanes.rs`); those
+/// past `count` are ignored. The same winners.
+pub fn resolve_lanes(
+    count: usize,
+    range: std::ops::Range<usize>,
+    candidates: impl Fn(usize) -> [Candidate; LANES] + Sync,
+) -> Winners {
     use rayon::prelude::*;
     use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
     let packed: Vec<AtomicU64> = range
@@ -130,16 +148,22 @@ pub fn resolve_with(
         .with_min_len(4096)
         .map(|_| AtomicU64::new(0))
         .collect();
-    (0..count).into_par_iter().with_min_len(4096).for_each(|i| {
-        let c = candidate(i);
-        let slot = (c.slot as usize).checked_sub(range.start);
-        if let Some(slot) = slot.and_then(|s| packed.get(s)) {
-            let v = (u64::from(c.key) << 32) | u64::from(!(i as u32));
-            if v > slot.load(Relaxed) {
-                slot.fetch_max(v, Relaxed);
+    let groups = count.div_ceil(LANES);
+    (0..groups)
+        .into_par_iter()
+        .with_min_len(1024)
+        .for_each(|g| {
+            let first = g * LANES;
+            for (i, c) in (first..count).zip(candidates(first)) {
+                let slot = (c.slot as usize).checked_sub(range.start);
+                if let Some(slot) = slot.and_then(|s| packed.get(s)) {
+                    let v = (u64::from(c.key) << 32) | u64::from(!(i as u32));
+                    if v > slot.load(Relaxed) {
+                        slot.fetch_max(v, Relaxed);
+                    }
+                }
             }
-        }
-    });
+        });
     // In place (same layout), without a second frame-sized allocation.
     let packed = packed.into_iter().map(AtomicU64::into_inner).collect();
     Winners {

@@ -26,10 +26,11 @@
 //! any fragment (they are the deepest layer and move only with rotation).
 //! A change of `L` or of the frame size drops the previous buffer.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3, Vec4};
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::{PassCamera, rebase};
+use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 use crate::passes::common::levels::{Grid, Levels};
 use crate::passes::common::splat::{self, Candidate, depth_key};
 use crate::passes::gffe::history::{is_confirmed, is_dynamic};
@@ -134,23 +135,75 @@ pub fn candidate(
     let Some(slot) = here.slot(r.pixel) else {
         return Candidate::MISS;
     };
+    let to = Landing {
+        slot,
+        pixel: r.pixel,
+        depth: r.depth,
+    };
+    judge(to, camera, bg, next, tolerance)
+}
+
+/// Where a valid fragment's projection lands on its own level.
+#[derive(Clone, Copy, Debug)]
+struct Landing {
+    slot: u32,
+    pixel: Vec2,
+    depth: f32,
+}
+
+/// [`candidate`] after the fragment's projection: case 1, case 2 or none,
+/// by what the current buffer holds where it lands.
+#[inline]
+fn judge(
+    Landing { slot, pixel, depth }: Landing,
+    camera: &PassCamera,
+    bg: &[Texel],
+    next: Option<Grid>,
+    tolerance: f32,
+) -> Candidate {
     let held = bg[slot as usize];
     if !held.is_valid() {
-        return Candidate {
-            slot,
-            key: depth_key(r.depth),
-        };
+        let key = depth_key(depth);
+        return Candidate { slot, key };
     }
     if let Some(next) = next
-        && r.depth > camera.depth_of(held.pos) * (1.0 + tolerance)
-        && let Some(slot) = next.slot(r.pixel)
+        && depth > camera.depth_of(held.pos) * (1.0 + tolerance)
+        && let Some(slot) = next.slot(pixel)
     {
-        return Candidate {
-            slot,
-            key: depth_key(r.depth),
-        };
+        let key = depth_key(depth);
+        return Candidate { slot, key };
     }
     Candidate::MISS
+}
+
+/// [`candidate`] of four fragments `t`, their projections made in lanes
+/// (`lanes.rs`: the same bits), what they land on judged one by one.
+#[inline]
+pub fn candidates4(
+    t: &[Texel; LANES],
+    shift: Vec3,
+    camera: &PassCamera,
+    bg: &[Texel],
+    (here, next): (Grid, Option<Grid>),
+    tolerance: f32,
+) -> [Candidate; LANES] {
+    let (p, w) = Lanes3::from_positions(&t.map(|t| t.pos));
+    // `rebase`: a point moves with the origin.
+    let point = w.cmpgt(Vec4::splat(0.5));
+    let shifted = p + Lanes3::splat([shift.x, shift.y, shift.z, 0.0]);
+    let r = project4(camera, Lanes3::select(point, shifted, p), w);
+    let cells = cells4(&r, here.width, here.height, here.scale);
+    std::array::from_fn(|l| match cells[l] {
+        Some(cell) if t[l].is_valid() => {
+            let to = Landing {
+                slot: here.offset + cell,
+                pixel: r.pixel(l),
+                depth: r.depth[l],
+            };
+            judge(to, camera, bg, next, tolerance)
+        }
+        _ => Candidate::MISS,
+    })
 }
 
 /// What the rendered frame seeds level 0 with (step 1).
@@ -190,9 +243,16 @@ pub fn collect(
             levels.grid(l),
             (l + 1 < levels.count).then(|| levels.grid(l + 1)),
         );
-        let winners = splat::resolve_with(source.len(), begin as usize..end as usize, |i| {
-            candidate(&source[i], shift, camera, &bg, here, next, tolerance)
-        });
+        let bg_ = &bg;
+        let one = |t: &Texel| candidate(t, shift, camera, bg_, here, next, tolerance);
+        let winners =
+            splat::resolve_lanes(source.len(), begin as usize..end as usize, |i| match source
+                .get(i..)
+                .and_then(|s| s.first_chunk())
+            {
+                Some(t) => candidates4(t, shift, camera, bg_, (here, next), tolerance),
+                None => std::array::from_fn(|l| source.get(i + l).map_or(Candidate::MISS, one)),
+            });
         bg[begin as usize..end as usize]
             .par_iter_mut()
             .zip(begin..end)
@@ -335,5 +395,82 @@ impl GpuBackground {
                 u64::from(end - start),
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{Camera, FrameSize, Pose, Projection};
+
+    /// Four fragments at a time are judged as one by one: over fragments
+    /// that are points, skies, nothing or NaN, landing on and off the
+    /// image, on empty slots, on the same surface and behind it.
+    #[test]
+    fn four_lanes_are_the_fragments_one_by_one() {
+        let size = FrameSize {
+            width: 64,
+            height: 36,
+        };
+        let pose = Pose::look_at(
+            glam::DVec3::new(0.0, 1.0, 3.0),
+            glam::DVec3::new(0.5, 0.0, -4.0),
+            glam::DVec3::Y,
+        );
+        let camera = Camera::new(pose, Projection::perspective(1.0, 16.0 / 9.0, 0.1, 1e4));
+        let camera = PassCamera::new(&camera, size, pose.position);
+        let levels = Levels::new(2, size.width, size.height);
+        let noise = |i: usize| (i as f32 * 0.618_034).fract();
+        // The current buffer: level 0 mostly held, at depths 4 to 6.
+        let bg: Vec<Texel> = (0..levels.total() as usize)
+            .map(|s| {
+                let pixel = Vec2::new((s % 64) as f32 + 0.5, (s / 64 % 36) as f32 + 0.5);
+                let held = noise(s * 3) < 0.7;
+                Texel {
+                    pos: camera.unproject(pixel, 4.0 + 2.0 * noise(s * 5)),
+                    color: [1.0, 1.0, 1.0, if held { 1.0 } else { 0.0 }],
+                }
+            })
+            .collect();
+        let shift = Vec3::new(0.02, -0.01, 0.03);
+        let source: Vec<Texel> = (0..4000)
+            .map(|i| {
+                let pixel = Vec2::new(noise(i) * 80.0 - 8.0, noise(i + 7919) * 44.0 - 4.0);
+                let depth = match i % 9 {
+                    0 => f32::INFINITY,
+                    1 => -1.0,
+                    _ => 3.0 + 5.0 * noise(i * 11),
+                };
+                let mut pos = camera.unproject(pixel, depth);
+                pos = [pos[0] - shift.x, pos[1] - shift.y, pos[2] - shift.z, pos[3]];
+                match i % 23 {
+                    0 => pos[3] = -1.0,
+                    1 => pos[1] = f32::NAN,
+                    _ => {}
+                }
+                let valid = i % 13 != 0;
+                Texel {
+                    pos,
+                    color: [0.5, 0.5, 0.5, if valid { 1.0 } else { 0.0 }],
+                }
+            })
+            .collect();
+        let (here, next) = (levels.grid(0), Some(levels.grid(1)));
+        let mut outcomes = [0usize; 3];
+        for four in source.chunks_exact(LANES) {
+            let four: &[Texel; LANES] = four.try_into().unwrap();
+            let lanes = candidates4(four, shift, &camera, &bg, (here, next), 0.02);
+            for (t, c) in four.iter().zip(lanes) {
+                assert_eq!(c, candidate(t, shift, &camera, &bg, here, next, 0.02));
+                let kind = match c.slot {
+                    splat::NONE => 0,
+                    s if s < levels.offset(1) => 1,
+                    _ => 2,
+                };
+                outcomes[kind] += 1;
+            }
+        }
+        // Misses, case 1 and case 2 were all met often.
+        assert!(outcomes.iter().all(|&n| n > 200), "{outcomes:?}");
     }
 }

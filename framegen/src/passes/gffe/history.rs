@@ -36,10 +36,11 @@
 //! Positions are stored relative to the current camera centre; the previous
 //! history is rebased by the previous camera's centre (computed in `f64`).
 
-use glam::Vec2;
+use glam::{Vec2, Vec4};
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::passes::common::camera::{PassCamera, W_DIRECTION, W_INVALID, cell, rebase};
+use crate::passes::common::camera::{PassCamera, W_DIRECTION, W_INVALID, W_POINT, cell, rebase};
+use crate::passes::common::lanes::{LANES, Lanes3, project4};
 
 /// The previous rendered frame's history, as the current frame sees it.
 #[derive(Clone, Copy, Debug)]
@@ -183,15 +184,31 @@ impl Tracker<'_> {
                 for (r, row) in words.chunks_mut(width).enumerate() {
                     let first = r * width;
                     let y = ((start + first) / width) as f32 + 0.5;
-                    for (c, word) in row.iter_mut().enumerate() {
-                        let center = Vec2::new(c as f32 + 0.5, y);
-                        // Every element is written, valid or not.
-                        let w = self.track(start + first + c, center, &mut entries);
-                        for (plane, e) in planes.iter_mut().zip(&entries) {
-                            plane[first + c] = *e;
+                    // Four pixels at a time where they take the common
+                    // case (`track4`), one by one otherwise.
+                    for (g, group) in row.chunks_mut(LANES).enumerate() {
+                        let c0 = g * LANES;
+                        let x = start + first + c0;
+                        if let Some((words, p)) = self.track4(x, c0, y) {
+                            for (l, (word, w)) in group.iter_mut().zip(words).enumerate() {
+                                for plane in planes.iter_mut() {
+                                    plane[first + c0 + l] = p[l];
+                                }
+                                *word = w;
+                            }
+                            continue;
                         }
-                        *word = w;
-                        dynamic += u32::from(is_dynamic(w));
+                        for (l, word) in group.iter_mut().enumerate() {
+                            let c = c0 + l;
+                            let center = Vec2::new(c as f32 + 0.5, y);
+                            // Every element is written, valid or not.
+                            let w = self.track(start + first + c, center, &mut entries);
+                            for (plane, e) in planes.iter_mut().zip(&entries) {
+                                plane[first + c] = *e;
+                            }
+                            *word = w;
+                            dynamic += u32::from(is_dynamic(w));
+                        }
                     }
                 }
                 dynamic
@@ -205,6 +222,114 @@ impl Tracker<'_> {
     }
 
     /// The history length in use.
+    /// [`Tracker::track`] of the four pixels `x .. x + 4` of one row (columns
+    /// `c0 ..`, row centre `y`) at once, as the lanes of `Vec4`s (SSE2 on
+    /// x86-64): the same operations in the same order, each correctly
+    /// rounded, so the same bits. Only the common case is taken, most of a
+    /// frame: a previous frame, four surfaces or skies, each reprojected
+    /// into it and static. Anything else (no surface, a dynamic pixel, a
+    /// projection off the image, a row's last pixels) gives `None`, and the
+    /// caller tracks the four one by one.
+    ///
+    /// Returns the track words and each pixel's position `p`, which every
+    /// entry of a static pixel holds.
+    #[inline]
+    fn track4(&self, x: usize, c0: usize, y: f32) -> Option<([u32; LANES], [[f32; 4]; LANES])> {
+        let prev = self.prev?;
+        let depth: &[f32; LANES] = self.depth.get(x..)?.first_chunk()?;
+        let motion: &[[f32; 2]; LANES] = self.motion.get(x..)?.first_chunk()?;
+        let d = Vec4::from_array(*depth);
+        // NaN fails too.
+        if !d.cmpgt(Vec4::ZERO).all() {
+            return None;
+        }
+        let sky = d.cmpeq(Vec4::INFINITY);
+        let cam = self.camera;
+        let c = c0 as f32;
+        let cx = Vec4::new(c, c + 1.0, c + 2.0, c + 3.0) + 0.5;
+        // `unproject`: the ray through each centre, then the point.
+        let ray = Lanes3 {
+            x: Vec4::splat(cam.ray[0]) + cx * cam.ray[1],
+            y: Vec4::splat(cam.ray[2] + y * cam.ray[3]),
+            z: Vec4::splat(-1.0),
+        };
+        let world = Lanes3::splat(cam.col0) * ray.x
+            + Lanes3::splat(cam.col1) * ray.y
+            + Lanes3::splat(cam.col2) * ray.z;
+        let point = Lanes3::splat(cam.eye) + world * d;
+        let direction = world * (Vec4::ONE / world.dot(world).map(f32::sqrt));
+        let p = Lanes3::select(sky, direction, point);
+        // The static test: `p` reprojected into the previous camera lands
+        // within ε of where the motion points.
+        let w = Vec4::select(sky, Vec4::splat(W_DIRECTION), Vec4::splat(W_POINT));
+        let r = project4(&prev.camera, p, w);
+        let target = (
+            cx + Vec4::from_array(motion.map(|m| m[0])),
+            Vec4::splat(y) + Vec4::from_array(motion.map(|m| m[1])),
+        );
+        let e = (r.x - target.0, r.y - target.1);
+        let eps = Vec4::splat(self.epsilon * self.epsilon);
+        if !(r.valid & (e.0 * e.0 + e.1 * e.1).cmple(eps)).all() {
+            return None;
+        }
+        let mut words = [((self.k() - 1) as u32) << 2; LANES];
+        let p = p.positions(w);
+        if let Some(tolerance) = self.tolerance {
+            let confirmed = self.confirm4(prev, (&p, w), target, tolerance);
+            for (word, c) in words.iter_mut().zip(confirmed) {
+                *word |= u32::from(c) << 1;
+            }
+        }
+        Some((words, p))
+    }
+
+    /// The confirmation of four static positions `p` with `w`s `kind` (see
+    /// [`Tracker::track`]): the previous frame's position at the pixel each
+    /// target lies in is of the same kind and, for a point, seen from the
+    /// current camera, lands where the depth agrees with it.
+    #[inline]
+    fn confirm4(
+        &self,
+        prev: &PrevHistory<'_>,
+        (p, kind): (&[[f32; 4]; LANES], Vec4),
+        (tx, ty): (Vec4, Vec4),
+        tolerance: f32,
+    ) -> [bool; LANES] {
+        let cam = self.camera;
+        let (pw, ph) = (prev.camera.width(), prev.camera.height());
+        let found: [Option<u32>; LANES] =
+            std::array::from_fn(|l| cell(Vec2::new(tx[l], ty[l]), pw, ph, 1.0));
+        // Each previous position, or the pixel's own where its target is off
+        // the previous image (projected, never confirmed).
+        let q: [[f32; 4]; LANES] = std::array::from_fn(|l| match found[l] {
+            Some(j) => rebase(prev.positions[j as usize], shift(prev)),
+            None => p[l],
+        });
+        let (q, qw) = Lanes3::from_positions(&q);
+        let same = qw.cmpeq(kind);
+        let sky = kind.cmpeq(Vec4::splat(W_DIRECTION));
+        let r = project4(cam, q, kind);
+        // A sky agrees with a previous sky; a point is seen again.
+        let (same, sky, seen) = (same.bitmask(), sky.bitmask(), r.valid.bitmask());
+        std::array::from_fn(|l| {
+            let lane = 1 << l;
+            if found[l].is_none() || same & lane == 0 {
+                return false;
+            }
+            if sky & lane != 0 {
+                return true;
+            }
+            let at = cell(Vec2::new(r.x[l], r.y[l]), cam.width(), cam.height(), 1.0);
+            match at {
+                Some(y) if seen & lane != 0 => {
+                    let dy = self.depth[y as usize];
+                    (r.depth[l] - dy).abs() <= tolerance * dy
+                }
+                _ => false,
+            }
+        })
+    }
+
     fn k(&self) -> usize {
         (self.k as usize).clamp(1, MAX_HISTORY)
     }
@@ -393,5 +518,148 @@ impl GpuHistory {
             ],
             u64::from(w) * u64::from(h),
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DQuat, DVec3};
+    use protocol::{Camera, FrameSize, Pose, Projection};
+
+    /// Every pixel through [`Tracker::track`], one by one.
+    fn one_by_one(t: &Tracker<'_>) -> History {
+        let (n, k, w) = (t.depth.len(), t.k(), t.camera.width() as usize);
+        let mut positions = vec![[0.0; 4]; k * n];
+        let mut track = vec![0; n];
+        let mut entries = [[0.0; 4]; MAX_HISTORY];
+        let mut dynamic = 0;
+        for x in 0..n {
+            let center = Vec2::new((x % w) as f32 + 0.5, (x / w) as f32 + 0.5);
+            track[x] = t.track(x, center, &mut entries);
+            for (i, e) in entries[..k].iter().enumerate() {
+                positions[i * n + x] = *e;
+            }
+            dynamic += u32::from(is_dynamic(track[x]));
+        }
+        History {
+            positions,
+            track,
+            dynamic,
+        }
+    }
+
+    fn bits(h: &History) -> (Vec<[u32; 4]>, &[u32], u32) {
+        let p = h.positions.iter().map(|p| p.map(f32::to_bits)).collect();
+        (p, &h.track, h.dynamic)
+    }
+
+    /// A deterministic scramble of `i` into `0..1`.
+    fn noise(i: usize, salt: u64) -> f32 {
+        let mut v = (i as u64 ^ salt.rotate_left(17)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        v ^= v >> 29;
+        v = v.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        ((v >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    /// The four-lane path gives the one-by-one path's bits, on frames that
+    /// mix its common case with everything that leaves it: skies, no
+    /// surface, NaN, dynamic pixels, targets off the previous image,
+    /// previous positions that are directions, invalid or far off, and a
+    /// width that leaves a partial group at each row's end.
+    #[test]
+    fn four_lanes_are_the_pixels_one_by_one() {
+        let size = FrameSize {
+            width: 67,
+            height: 29,
+        };
+        let n = (size.width * size.height) as usize;
+        let projection = Projection::perspective(1.0, 67.0 / 29.0, 0.1, f64::INFINITY);
+        let origin = DVec3::new(1e4, -3.0, 20.0);
+        let at = |eye: DVec3, yaw: f64| {
+            let rotation = DQuat::from_rotation_y(yaw) * DQuat::from_rotation_x(-0.1);
+            Camera::new(Pose::new(eye, rotation), projection)
+        };
+        let cur = at(origin, 0.02);
+        let before = at(origin + DVec3::new(-0.15, 0.02, 0.1), 0.0);
+        let camera = PassCamera::new(&cur, size, origin);
+        let prev_own = PassCamera::new(&before, size, before.pose.position);
+        let prev_camera = PassCamera::new(&before, size, origin);
+        // A sky above, and specials scattered.
+        let depth_at = |x: usize, salt: u64| match (noise(x, salt) * 40.0) as u32 {
+            _ if x < 6 * 67 => f32::INFINITY,
+            0 => 0.0,
+            1 => f32::INFINITY,
+            2 if salt == 1 => f32::NAN,
+            // A smooth surface, so that a confirmation mostly agrees.
+            _ => 3.0 + 2.0 * (x % 67) as f32 / 67.0 + (x / 67) as f32 / 29.0,
+        };
+        // The previous frame, tracked alone: every pixel static.
+        let prev_depth: Vec<f32> = (0..n).map(|x| depth_at(x, 2)).collect();
+        let still = vec![[0.0; 2]; n];
+        for k in [1, 2, 4] {
+            let mut prev = track(&prev_own, &prev_depth, &still, None, k, 0.5, 0.02);
+            // Some previous positions a confirmation cannot use, or finds
+            // elsewhere.
+            for (x, p) in prev.positions.iter_mut().enumerate() {
+                match (noise(x, 5) * 30.0) as u32 {
+                    0 => p[3] = W_DIRECTION,
+                    1 => p[3] = W_INVALID,
+                    2 => p[2] += 3.0,
+                    3 => p[0] = f32::NAN,
+                    _ => {}
+                }
+            }
+            let depth: Vec<f32> = (0..n).map(|x| depth_at(x, 1)).collect();
+            // Motion that is the camera's (static) for most pixels, off by
+            // less or more than ε for some, far off the image for a few.
+            let motion: Vec<[f32; 2]> = (0..n)
+                .map(|x| {
+                    let w = size.width as usize;
+                    let c = Vec2::new((x % w) as f32 + 0.5, (x / w) as f32 + 0.5);
+                    let p = camera.unproject(c, depth[x]);
+                    let to = prev_camera.project(p).map_or(c, |r| r.pixel);
+                    let off = match (noise(x, 3) * 20.0) as u32 {
+                        0 => Vec2::new(2.0, -1.0),
+                        1 => Vec2::new(0.3, 0.3),
+                        2 => Vec2::new(-500.0, 0.0),
+                        _ => Vec2::ZERO,
+                    };
+                    (to - c + off).to_array()
+                })
+                .collect();
+            let prev = PrevHistory {
+                camera: prev_camera,
+                positions: &prev.positions,
+                track: &prev.track,
+            };
+            for tolerance in [Some(0.02), None] {
+                let t = Tracker {
+                    camera: &camera,
+                    depth: &depth,
+                    motion: &motion,
+                    prev: Some(&prev),
+                    k,
+                    epsilon: 0.5,
+                    tolerance,
+                };
+                let fast = t.track_into(History::empty());
+                let slow = one_by_one(&t);
+                assert_eq!(bits(&fast), bits(&slow), "k = {k}, {tolerance:?}");
+                // Both paths were taken, and both confirmation outcomes.
+                let w = size.width as usize;
+                let groups = (0..n)
+                    .filter(|x| x % w % LANES == 0)
+                    .filter(|&x| t.track4(x, x % w, (x / w) as f32 + 0.5).is_some())
+                    .count();
+                let all = size.height as usize * w.div_ceil(LANES);
+                assert!(groups * 4 > all && groups < all, "{groups} of {all} groups");
+                let confirmed = fast.track.iter().filter(|&&w| is_confirmed(w)).count();
+                if tolerance.is_some() {
+                    assert!(confirmed > n / 4 && confirmed < n * 3 / 4, "{confirmed}");
+                }
+                assert!(fast.dynamic > 0);
+            }
+        }
     }
 }

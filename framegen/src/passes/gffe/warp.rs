@@ -23,6 +23,7 @@ use glam::Vec2;
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{CRACK, DisplayMap, EMPTY, GpuOutput, Output, Pixel, WARPED};
 use crate::passes::common::camera::{PassCamera, cell, pixel_center};
+use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 use crate::passes::common::resample::{self, Resample, Source};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 
@@ -52,6 +53,22 @@ pub fn candidate_at(p: [f32; 4], target: &PassCamera) -> (Candidate, Vec2) {
         key: depth_key(r.depth),
     });
     (c.unwrap_or(Candidate::MISS), r.pixel)
+}
+
+/// [`candidate_at`] of four positions, projected in lanes (`lanes.rs`: the
+/// same bits).
+#[inline]
+pub fn candidates_at4(p: &[[f32; 4]; LANES], target: &PassCamera) -> [(Candidate, Vec2); LANES] {
+    let (q, w) = Lanes3::from_positions(p);
+    let r = project4(target, q, w);
+    let cells = cells4(&r, target.width(), target.height(), 1.0);
+    std::array::from_fn(|l| match cells[l] {
+        Some(slot) => {
+            let key = depth_key(r.depth[l]);
+            (Candidate { slot, key }, r.pixel(l))
+        }
+        None => (Candidate::MISS, Vec2::ZERO),
+    })
 }
 
 /// How `warp_resolve` takes a winner's colour: the filter, and the map
@@ -292,4 +309,64 @@ pub struct GpuSource<'a> {
     pub next: &'a wgpu::Buffer,
     /// Width and height.
     pub size: (u32, u32),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{Camera, FrameSize, Pose, Projection};
+
+    /// Four positions at a time land where each lands alone: points on and
+    /// off the target, behind it, skies, nothing, NaN, and a target wider
+    /// than the image the positions came from.
+    #[test]
+    fn four_lanes_land_as_one_by_one() {
+        let size = FrameSize {
+            width: 96,
+            height: 54,
+        };
+        let pose = Pose::look_at(
+            glam::DVec3::new(0.0, 1.0, 3.0),
+            glam::DVec3::new(0.5, 0.0, -4.0),
+            glam::DVec3::Y,
+        );
+        let projection = Projection::perspective(1.0, 16.0 / 9.0, 0.1, 1e4);
+        let source = PassCamera::new(&Camera::new(pose, projection), size, pose.position);
+        let moved = Pose::look_at(
+            glam::DVec3::new(0.2, 1.1, 2.9),
+            glam::DVec3::new(0.6, 0.0, -4.0),
+            glam::DVec3::Y,
+        );
+        let target = PassCamera::new(&Camera::new(moved, projection), size, pose.position);
+        let noise = |i: usize| (i as f32 * 0.618_034).fract();
+        let p: Vec<[f32; 4]> = (0..4000)
+            .map(|i| {
+                let pixel = Vec2::new(noise(i) * 120.0 - 12.0, noise(i + 7919) * 68.0 - 7.0);
+                let depth = [3.0 + 9.0 * noise(i * 5), f32::INFINITY, -2.0][i % 7 / 5];
+                let mut p = source.unproject(pixel, depth);
+                match i % 31 {
+                    0 => p[3] = -1.0,
+                    1 => p[0] = f32::NAN,
+                    _ => {}
+                }
+                p
+            })
+            .collect();
+        let mut landed = 0;
+        for four in p.chunks_exact(LANES) {
+            let four: &[[f32; 4]; LANES] = four.try_into().unwrap();
+            for (l, (c, at)) in candidates_at4(four, &target).into_iter().enumerate() {
+                let (one, one_at) = candidate_at(four[l], &target);
+                assert_eq!(c, one, "{:?}", four[l]);
+                if c.slot != crate::passes::common::splat::NONE {
+                    assert_eq!(
+                        at.to_array().map(f32::to_bits),
+                        one_at.to_array().map(f32::to_bits)
+                    );
+                    landed += 1;
+                }
+            }
+        }
+        assert!(landed > 1000 && landed < 3500, "{landed} of 4000 landed");
+    }
 }
