@@ -175,6 +175,7 @@ pub struct Previous<'a> {
 
 /// Step 1 for pixel `(px, py)` whose luminance plus [`LUMA_FLOOR`] is
 /// `lt`: `(r_t, r_{t−1} aligned)`.
+#[inline]
 pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_>) -> [f32; 2] {
     let (w, h) = cur.size;
     let x = (py * w + px) as usize;
@@ -204,6 +205,19 @@ pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_
     if same_surface(prev.depth[near], d) && lt <= l * STILL && l <= lt * STILL {
         return [0.0, aligned];
     }
+    [footprint(p, d, lt, cur.size, prev), aligned]
+}
+
+/// [`ratio_at`]'s `r_t` where the pixel the aligned position `p` falls in
+/// does not settle it: the nearest end of the range of the position's
+/// bilinear footprint (on the surface of depth `d`) against `lt`. Out of
+/// line: the common case above stays a short loop.
+#[inline(never)]
+fn footprint(p: Vec2, d: f32, lt: f32, (w, h): (u32, u32), prev: &Previous<'_>) -> f32 {
+    let luma_at = |s: usize| match prev.luma.get(s) {
+        Some(&l) => l,
+        None => luminance(prev.color[s]) + LUMA_FLOOR,
+    };
     // The bilinear footprint of the aligned position: what a sub-pixel
     // shift of the surface's texture could show there.
     let (bx, by) = (floor(p.x - 0.5), floor(p.y - 0.5));
@@ -235,7 +249,7 @@ pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_
     } else {
         0.0
     };
-    [quantize(best.clamp(-MAX_LOG_RATIO, MAX_LOG_RATIO)), aligned]
+    quantize(best.clamp(-MAX_LOG_RATIO, MAX_LOG_RATIO))
 }
 
 /// Step 1 for every pixel, on all cores, into `out`; frame `t`'s
