@@ -175,6 +175,47 @@ pub fn pixel_center(i: usize, width: u32) -> Vec2 {
     Vec2::new((i % width) as f32 + 0.5, (i / width) as f32 + 0.5)
 }
 
+/// The pixels of a `width`-wide image by index, for a loop that asks
+/// [`pixel_center`] of arbitrary indices (a warp's winners): the division
+/// by the width as two multiplications (Lemire, Kaser and Kurz, "Faster
+/// remainder by direct computation", 2019), exact for every `u32` index
+/// and width. A 32-bit `div` costs some ten cycles and stalls what waits
+/// on it; the warp asked two per pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Columns {
+    width: u32,
+    /// `⌈2⁶⁴ / width⌉` (0 for a width of 1, taken apart).
+    magic: u64,
+}
+
+impl Columns {
+    /// The columns of a `width`-wide image (at least 1).
+    pub fn new(width: u32) -> Self {
+        let width = width.max(1);
+        let magic = (u64::MAX / u64::from(width)).wrapping_add(1);
+        Self { width, magic }
+    }
+
+    /// `(i % width, i / width)`.
+    #[inline]
+    pub fn split(&self, i: u32) -> (u32, u32) {
+        if self.width == 1 {
+            return (0, i);
+        }
+        let low = self.magic.wrapping_mul(u64::from(i));
+        let x = (u128::from(low) * u128::from(self.width)) >> 64;
+        let y = (u128::from(self.magic) * u128::from(i)) >> 64;
+        (x as u32, y as u32)
+    }
+
+    /// [`pixel_center`] of pixel `i`.
+    #[inline]
+    pub fn center(&self, i: usize) -> Vec2 {
+        let (x, y) = self.split(i as u32);
+        Vec2::new(x as f32 + 0.5, y as f32 + 0.5)
+    }
+}
+
 /// Linear index of the cell containing `px` in a `w`×`h` grid whose cells are
 /// `scale` pixels wide; `None` outside. WGSL `cell`.
 #[inline]
@@ -200,4 +241,41 @@ pub fn rebase(p: [f32; 4], shift: Vec3) -> [f32; 4] {
 /// `[f32; 4]` as a glam vector.
 pub fn v4(p: [f32; 4]) -> Vec4 {
     Vec4::from_array(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The multiplications are the division, for every width up to a few
+    /// thousand and the extremes, at indices up to `u32::MAX` (the edges
+    /// of each row, every index of small images, and a scramble).
+    #[test]
+    fn columns_divide_exactly() {
+        let widths = (1..=4100).chain([65_535, 65_536, 1 << 20, u32::MAX - 1, u32::MAX]);
+        for w in widths {
+            let c = Columns::new(w);
+            let check = |i: u32| assert_eq!(c.split(i), (i % w, i / w), "{i} / {w}");
+            let ends = [0, 1, w - 1, w, w.wrapping_add(1), u32::MAX - 1, u32::MAX];
+            ends.into_iter().for_each(check);
+            for k in [2u32, 3, 1000, 65_537] {
+                let row = w.saturating_mul(k);
+                [row.saturating_sub(1), row, row.saturating_add(1)]
+                    .into_iter()
+                    .for_each(check);
+            }
+            let mut v = u64::from(w).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+            for _ in 0..200 {
+                v ^= v >> 31;
+                v = v.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+                check((v >> 32) as u32);
+            }
+        }
+        for w in [1, 7, 1280, 1920] {
+            let c = Columns::new(w);
+            for i in 0..(4_000_000 / w).max(10) * w {
+                assert_eq!(c.center(i as usize), pixel_center(i as usize, w));
+            }
+        }
+    }
 }

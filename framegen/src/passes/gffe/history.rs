@@ -257,8 +257,15 @@ impl Tracker<'_> {
             + Lanes3::splat(cam.col1) * ray.y
             + Lanes3::splat(cam.col2) * ray.z;
         let point = Lanes3::splat(cam.eye) + world * d;
-        let direction = world * (Vec4::ONE / world.dot(world).map(f32::sqrt));
-        let p = Lanes3::select(sky, direction, point);
+        // A sky's direction (`normalize`) only where there is one: a
+        // division and a square root saved in most groups.
+        let p = match sky.any() {
+            true => {
+                let direction = world * (Vec4::ONE / world.dot(world).map(f32::sqrt));
+                Lanes3::select(sky, direction, point)
+            }
+            false => point,
+        };
         // The static test: `p` reprojected into the previous camera lands
         // within ε of where the motion points.
         let w = Vec4::select(sky, Vec4::splat(W_DIRECTION), Vec4::splat(W_POINT));

@@ -22,7 +22,7 @@ use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{CRACK, DisplayMap, EMPTY, GpuOutput, Output, Pixel, WARPED};
-use crate::passes::common::camera::{PassCamera, cell, pixel_center};
+use crate::passes::common::camera::{Columns, PassCamera, cell};
 use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 use crate::passes::common::resample::{self, Resample, Source};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
@@ -96,12 +96,13 @@ pub fn resolve(
     how: Resolve,
 ) -> Output {
     let (width, height) = how.size;
+    let (target, image) = (Columns::new(width), Columns::new(source.size.0));
     Output::from_fn(width, height, |t| {
         let Some(i) = winners.winner(t) else {
             return Pixel::EMPTY;
         };
-        let center = pixel_center(t, width);
-        let own = pixel_center(i, source.size.0);
+        let center = target.center(t);
+        let own = image.center(i);
         let at = resample::position(own, || landing(i), center, how.map.scale, how.filter);
         let c = resample::resample(source, i, at, how.filter);
         Pixel {

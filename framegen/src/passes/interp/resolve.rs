@@ -24,7 +24,7 @@ use glam::{Vec2, Vec4};
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{Output, WARPED};
-use crate::passes::common::camera::pixel_center;
+use crate::passes::common::camera::Columns;
 use crate::passes::common::resample::{self, Resample, Source, same_surface};
 use crate::passes::common::sample::{clamp_index, inside};
 
@@ -97,8 +97,9 @@ pub fn resolve(
     use rayon::prelude::*;
     let (w, h) = (out.width, out.height);
     let size = Vec2::new(w as f32, h as f32);
+    let columns = Columns::new(w);
     out.par_pixels_mut().for_each(|(t, px)| {
-        let center = pixel_center(t, w);
+        let center = columns.center(t);
         let m = Vec2::from_array(*px.motion) * size;
         let (color, depth) = match fetch(center, m, *px.mask == WARPED, alpha, current, previous) {
             Fetch::Both(before, now) => {
