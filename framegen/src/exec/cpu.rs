@@ -435,7 +435,6 @@ impl Executor for CpuBackend {
             // Each landing position is kept where it is made (its own
             // element, written once, read only for winners).
             let landings = &*landings;
-            let zt0 = Instant::now();
             let n = track.len();
             // Four at a time, projected in lanes; the last few alone.
             let winners = splat::resolve_lanes(n, 0..(w * h) as usize, |first| {
@@ -477,18 +476,8 @@ impl Executor for CpuBackend {
                 filter: job.resample,
                 size: (w, h),
             };
-            let zt1 = Instant::now();
             let mut out = warp::resolve(&winners, source, landing, how);
-            let zt2 = Instant::now();
             warp::close_cracks(&mut out);
-            if std::env::var_os("ZZ").is_some() {
-                eprintln!(
-                    "ZZ {:.3} {:.3} {:.3}",
-                    (zt1 - zt0).as_secs_f64() * 1e3,
-                    (zt2 - zt1).as_secs_f64() * 1e3,
-                    zt2.elapsed().as_secs_f64() * 1e3
-                );
-            }
             out
         });
         if let Some(buffer) = shaded {

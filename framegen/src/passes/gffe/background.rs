@@ -243,14 +243,14 @@ pub fn collect(
             levels.grid(l),
             (l + 1 < levels.count).then(|| levels.grid(l + 1)),
         );
-        let bg_ = &bg;
-        let one = |t: &Texel| candidate(t, shift, camera, bg_, here, next, tolerance);
+        let current = &bg;
+        let one = |t: &Texel| candidate(t, shift, camera, current, here, next, tolerance);
         let winners =
             splat::resolve_lanes(source.len(), begin as usize..end as usize, |i| match source
                 .get(i..)
                 .and_then(|s| s.first_chunk())
             {
-                Some(t) => candidates4(t, shift, camera, bg_, (here, next), tolerance),
+                Some(t) => candidates4(t, shift, camera, current, (here, next), tolerance),
                 None => std::array::from_fn(|l| source.get(i + l).map_or(Candidate::MISS, one)),
             });
         bg[begin as usize..end as usize]

@@ -189,7 +189,8 @@ impl Tracker<'_> {
                     for (g, group) in row.chunks_mut(LANES).enumerate() {
                         let c0 = g * LANES;
                         let x = start + first + c0;
-                        if let Some((words, p)) = self.track4(x, c0, y) {
+                        let whole = group.len() == LANES;
+                        if let Some((words, p)) = whole.then(|| self.track4(x, c0, y)).flatten() {
                             for (l, (word, w)) in group.iter_mut().zip(words).enumerate() {
                                 for plane in planes.iter_mut() {
                                     plane[first + c0 + l] = p[l];
@@ -221,7 +222,6 @@ impl Tracker<'_> {
         }
     }
 
-    /// The history length in use.
     /// [`Tracker::track`] of the four pixels `x .. x + 4` of one row (columns
     /// `c0 ..`, row centre `y`) at once, as the lanes of `Vec4`s (SSE2 on
     /// x86-64): the same operations in the same order, each correctly
@@ -337,6 +337,7 @@ impl Tracker<'_> {
         })
     }
 
+    /// The history length in use.
     fn k(&self) -> usize {
         (self.k as usize).clamp(1, MAX_HISTORY)
     }

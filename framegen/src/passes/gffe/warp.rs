@@ -318,8 +318,8 @@ mod tests {
     use protocol::{Camera, FrameSize, Pose, Projection};
 
     /// Four positions at a time land where each lands alone: points on and
-    /// off the target, behind it, skies, nothing, NaN, and a target wider
-    /// than the image the positions came from.
+    /// off the target, behind it, skies, nothing and NaN, seen from a
+    /// camera that moved.
     #[test]
     fn four_lanes_land_as_one_by_one() {
         let size = FrameSize {
