@@ -179,18 +179,12 @@ mod tests {
     /// directions, nothing, NaN, points behind the camera and far off.
     #[test]
     fn lanes_are_the_scalar_camera() {
-        use protocol::{Camera, FrameSize, Pose, Projection};
-        let pose = Pose::look_at(
-            glam::DVec3::new(3.0, 1.0, 2.0),
-            glam::DVec3::new(0.0, 0.5, -4.0),
-            glam::DVec3::Y,
+        let camera = crate::testutil::looking(
+            [3.0, 1.0, 2.0],
+            [0.0, 0.5, -4.0],
+            (1280, 720),
+            [2.5, 1.0, 2.0],
         );
-        let camera = Camera::new(pose, Projection::perspective(1.0, 16.0 / 9.0, 0.1, 1e4));
-        let size = FrameSize {
-            width: 1280,
-            height: 720,
-        };
-        let camera = PassCamera::new(&camera, size, glam::DVec3::new(2.5, 1.0, 2.0));
         let specials = [0.0, -1.0, f32::NAN, f32::INFINITY, 1e-30, 1e30];
         let mut seen = [0usize; 3];
         for i in 0..4000usize {

@@ -401,25 +401,15 @@ impl GpuBackground {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::{Camera, FrameSize, Pose, Projection};
 
     /// Four fragments at a time are judged as one by one: over fragments
     /// that are points, skies, nothing or NaN, landing on and off the
     /// image, on empty slots, on the same surface and behind it.
     #[test]
     fn four_lanes_are_the_fragments_one_by_one() {
-        let size = FrameSize {
-            width: 64,
-            height: 36,
-        };
-        let pose = Pose::look_at(
-            glam::DVec3::new(0.0, 1.0, 3.0),
-            glam::DVec3::new(0.5, 0.0, -4.0),
-            glam::DVec3::Y,
-        );
-        let camera = Camera::new(pose, Projection::perspective(1.0, 16.0 / 9.0, 0.1, 1e4));
-        let camera = PassCamera::new(&camera, size, pose.position);
-        let levels = Levels::new(2, size.width, size.height);
+        let eye = [0.0, 1.0, 3.0];
+        let camera = crate::testutil::looking(eye, [0.5, 0.0, -4.0], (64, 36), eye);
+        let levels = Levels::new(2, 64, 36);
         let noise = |i: usize| (i as f32 * 0.618_034).fract();
         // The current buffer: level 0 mostly held, at depths 4 to 6.
         let bg: Vec<Texel> = (0..levels.total() as usize)

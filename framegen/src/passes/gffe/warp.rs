@@ -315,30 +315,15 @@ pub struct GpuSource<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::{Camera, FrameSize, Pose, Projection};
 
     /// Four positions at a time land where each lands alone: points on and
     /// off the target, behind it, skies, nothing and NaN, seen from a
     /// camera that moved.
     #[test]
     fn four_lanes_land_as_one_by_one() {
-        let size = FrameSize {
-            width: 96,
-            height: 54,
-        };
-        let pose = Pose::look_at(
-            glam::DVec3::new(0.0, 1.0, 3.0),
-            glam::DVec3::new(0.5, 0.0, -4.0),
-            glam::DVec3::Y,
-        );
-        let projection = Projection::perspective(1.0, 16.0 / 9.0, 0.1, 1e4);
-        let source = PassCamera::new(&Camera::new(pose, projection), size, pose.position);
-        let moved = Pose::look_at(
-            glam::DVec3::new(0.2, 1.1, 2.9),
-            glam::DVec3::new(0.6, 0.0, -4.0),
-            glam::DVec3::Y,
-        );
-        let target = PassCamera::new(&Camera::new(moved, projection), size, pose.position);
+        let (eye, size) = ([0.0, 1.0, 3.0], (96, 54));
+        let source = crate::testutil::looking(eye, [0.5, 0.0, -4.0], size, eye);
+        let target = crate::testutil::looking([0.2, 1.1, 2.9], [0.6, 0.0, -4.0], size, eye);
         let noise = |i: usize| (i as f32 * 0.618_034).fract();
         let p: Vec<[f32; 4]> = (0..4000)
             .map(|i| {
