@@ -40,7 +40,7 @@ use glam::{Vec2, Vec4};
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::{PassCamera, W_DIRECTION, W_INVALID, W_POINT, cell, rebase};
-use crate::passes::common::lanes::{LANES, Lanes3, project4};
+use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 
 /// The previous rendered frame's history, as the current frame sees it.
 #[derive(Clone, Copy, Debug)]
@@ -317,7 +317,8 @@ impl Tracker<'_> {
         let sky = kind.cmpeq(Vec4::splat(W_DIRECTION));
         let r = project4(cam, q, kind);
         // A sky agrees with a previous sky; a point is seen again.
-        let (same, sky, seen) = (same.bitmask(), sky.bitmask(), r.valid.bitmask());
+        let (same, sky) = (same.bitmask(), sky.bitmask());
+        let seen = cells4(&r, cam.width(), cam.height(), 1.0);
         std::array::from_fn(|l| {
             let lane = 1 << l;
             if found[l].is_none() || same & lane == 0 {
@@ -326,14 +327,10 @@ impl Tracker<'_> {
             if sky & lane != 0 {
                 return true;
             }
-            let at = cell(Vec2::new(r.x[l], r.y[l]), cam.width(), cam.height(), 1.0);
-            match at {
-                Some(y) if seen & lane != 0 => {
-                    let dy = self.depth[y as usize];
-                    (r.depth[l] - dy).abs() <= tolerance * dy
-                }
-                _ => false,
-            }
+            seen[l].is_some_and(|y| {
+                let dy = self.depth[y as usize];
+                (r.depth[l] - dy).abs() <= tolerance * dy
+            })
         })
     }
 
