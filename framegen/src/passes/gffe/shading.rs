@@ -337,16 +337,20 @@ pub fn flow_block(b: usize, ratio: &[[f32; 2]], size: (u32, u32)) -> [f32; 4] {
         return [0.0; 4];
     }
     let mut before = [[0i32; SPAN]; SPAN];
+    // The window's columns inside the frame, the same in every row: one
+    // slice of each row, without a test per element.
+    let left = x0 as i32 - REACH;
+    let (from, to) = (left.max(0), (left + SPAN as i32).min(w as i32));
+    let columns = (from - left) as usize..(to - left) as usize;
     for (y, row) in before.iter_mut().enumerate() {
         let sy = y0 as i32 - REACH + y as i32;
         if sy < 0 || sy >= h as i32 {
             continue;
         }
-        for (x, v) in row.iter_mut().enumerate() {
-            let sx = x0 as i32 - REACH + x as i32;
-            if sx >= 0 && sx < w as i32 {
-                *v = quanta(ratio[(sy as u32 * w + sx as u32) as usize][1]);
-            }
+        let line = (sy as u32 * w) as usize;
+        let source = &ratio[line + from as usize..line + to as usize];
+        for (v, r) in row[columns.clone()].iter_mut().zip(source) {
+            *v = quanta(r[1]);
         }
     }
     // Σ|r_t(x) − r_{t−1}(x − d)| in quanta, or `None` once past `limit`.
