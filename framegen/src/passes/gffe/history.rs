@@ -189,8 +189,9 @@ impl Tracker<'_> {
                     for (g, group) in row.chunks_mut(LANES).enumerate() {
                         let c0 = g * LANES;
                         let x = start + first + c0;
-                        let whole = group.len() == LANES;
-                        if let Some((words, p)) = whole.then(|| self.track4(x, c0, y)).flatten() {
+                        if group.len() == LANES
+                            && let Some((words, p)) = self.track4(x, c0, y)
+                        {
                             for (l, (word, w)) in group.iter_mut().zip(words).enumerate() {
                                 for plane in planes.iter_mut() {
                                     plane[first + c0 + l] = p[l];
