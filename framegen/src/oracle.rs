@@ -72,7 +72,7 @@ pub fn backward_warp(
             mask: WARPED,
         }
     });
-    pushpull::fill(&mut out, pushpull_levels);
+    pushpull::fill(&mut out, pushpull_levels, &mut pushpull::Scratch::default());
     // The true geometry wherever the fill left its own.
     out.depth.copy_from_slice(&dst.depth);
     out.motion.copy_from_slice(&dst.motion);

@@ -86,6 +86,8 @@ pub struct CpuBackend {
     shaded: Option<Vec<[f32; 4]>>,
     /// `shaded`'s allocation between generated frames.
     shaded_buffer: Vec<[f32; 4]>,
+    /// Push-pull's maps of the texels it made, kept between frames.
+    holes: pushpull::Scratch,
 }
 
 fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
@@ -511,9 +513,12 @@ impl Executor for CpuBackend {
     }
 
     fn pushpull(&mut self, job: &Job) -> Result<(), FramegenError> {
-        let (_, out, t) = self.parts()?;
-        let out = Self::output(out)?;
-        timed(t, Pass::Holes, || pushpull::fill(out, job.pushpull));
+        self.parts()?;
+        let out = Self::output(&mut self.out)?;
+        let scratch = &mut self.holes;
+        timed(&mut self.timings, Pass::Holes, || {
+            pushpull::fill(out, job.pushpull, scratch)
+        });
         Ok(())
     }
 
