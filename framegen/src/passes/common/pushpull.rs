@@ -364,23 +364,6 @@ impl Drop for Made<'_> {
     }
 }
 
-/// Where `mask` is [`EMPTY`], in order. Runs of pixels are tested
-/// together first (a loop the compiler vectorizes): holes are few.
-fn holes_of(mask: &[u32]) -> Vec<usize> {
-    use rayon::prelude::*;
-    const RUN: usize = 64;
-    mask.par_chunks(RUN)
-        .enumerate()
-        .flat_map_iter(|(r, run)| {
-            let any = run.iter().fold(false, |any, &m| any | (m == EMPTY));
-            let at = move |(i, &m): (usize, &u32)| (m == EMPTY).then_some(r * RUN + i);
-            any.then(|| run.iter().enumerate().filter_map(at))
-                .into_iter()
-                .flatten()
-        })
-        .collect()
-}
-
 /// What [`fill_near`] did, and how many texel reads it spent of its
 /// budget (four for each texel it made).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -416,15 +399,11 @@ fn fill_near(out: &mut Output, layout: Levels, budget: usize, scratch: &mut Scra
     if layout.count < 2 {
         return Near::GaveUp(0);
     }
-    // Counted first (a loop the compiler vectorizes), listed only if few.
-    let count = out
-        .mask
-        .par_chunks(4096)
-        .map(|run| run.iter().map(|&m| usize::from(m == EMPTY)).sum::<usize>());
-    if count.sum::<usize>() > budget / 4 {
+    // Counted first, listed only if few.
+    if out.hole_count() > budget / 4 {
         return Near::GaveUp(0);
     }
-    let holes = holes_of(&out.mask);
+    let holes = out.holes();
     // made[k − 1]: what is made of level k; empty[k]: the texels of level
     // k that read level k + 1 (the holes, then empty texels made).
     let mut made: Vec<Made> = Vec::new();

@@ -21,7 +21,7 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{CRACK, DisplayMap, EMPTY, GpuOutput, Output, Pixel, WARPED};
+use crate::output::{CRACK, DisplayMap, GpuOutput, Output, Pixel, WARPED};
 use crate::passes::common::camera::{Columns, PassCamera, cell};
 use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 use crate::passes::common::resample::{self, Resample, Source};
@@ -133,9 +133,7 @@ pub fn close_cracks(out: &mut Output) {
     let read = &*out;
     // Cracks are few: find them in parallel (reading only pixels that
     // were warped before, never one being written), then write them.
-    let fixes: Vec<(usize, [f32; 4], f32, [f32; 2])> = (0..read.mask.len())
-        .into_par_iter()
-        .filter(|&t| read.mask[t] == EMPTY)
+    let fixes: Vec<(usize, [f32; 4], f32, [f32; 2])> = (read.holes().into_par_iter())
         .filter_map(|t| {
             let (x, y) = ((t as i32) % w, (t as i32) / w);
             PAIRS.iter().find_map(|pair| {
