@@ -28,6 +28,8 @@
 
 use std::time::Duration;
 
+mod common;
+
 use criterion::{Criterion, criterion_group};
 use framegen::{FrameGenerator, GpuBackend, GpuContext, Method, Pass, Resample, Settings};
 use protocol::{Frame, FrameSize};
@@ -251,8 +253,5 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
 criterion_group!(benches, bench);
 
 fn main() {
-    // As the client does at start-up (see `framegen::memory`).
-    framegen::memory::retain_freed_memory();
-    benches();
-    Criterion::default().configure_from_args().final_summary();
+    common::main(benches);
 }

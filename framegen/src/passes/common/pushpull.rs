@@ -523,12 +523,18 @@ pub fn fill(out: &mut Output, levels: u32, scratch: &mut Scratch) {
     let layout = layout(out.width, out.height, levels);
     let budget = out.mask.len() / NEAR_BUDGET;
     if let Near::GaveUp(_) = fill_near(out, layout, budget, scratch) {
-        fill_pyramid(out, layout);
+        pyramid(out, layout);
     }
 }
 
-/// [`fill`] through the whole pyramid of `layout`.
-fn fill_pyramid(out: &mut Output, layout: Levels) {
+/// [`fill`] through the whole pyramid of `levels`, as the kernels fill
+/// (the same result: what `fill` is measured against).
+pub fn fill_pyramid(out: &mut Output, levels: u32) {
+    pyramid(out, layout(out.width, out.height, levels));
+}
+
+/// [`fill_pyramid`] of `layout`.
+fn pyramid(out: &mut Output, layout: Levels) {
     // Every stored texel is written by `pull` before anything reads it.
     let mut pyramid = crate::par::filled(Texel::default(), stored(layout).1 as usize);
     for k in 0..layout.count - 1 {
@@ -695,7 +701,7 @@ mod tests {
                 for levels in [1, 2, 3, 7] {
                     let layout = layout(w, h, levels);
                     let mut slow = out.clone();
-                    fill_pyramid(&mut slow, layout);
+                    fill_pyramid(&mut slow, levels);
                     let case = format!("{w}×{h} pattern {p} levels {levels}");
                     assert_eq!(slow.count(EMPTY), 0, "{case}");
                     assert_eq!(slow.count(FILLED), holes, "{case}");
@@ -753,7 +759,7 @@ mod tests {
             Near::Filled(spent) => assert!(spent <= budget / 2, "{spent} of {budget}"),
             gave_up => panic!("{gave_up:?}"),
         }
-        fill_pyramid(&mut slow, layout);
+        fill_pyramid(&mut slow, 7);
         assert_eq!(bits(&near), bits(&slow));
     }
 }
