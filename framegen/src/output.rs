@@ -121,9 +121,13 @@ impl Output {
         }
     }
 
-    /// Number of pixels with the given mask value.
+    /// Number of pixels with the given mask value, counted on all cores (a
+    /// loop the compiler vectorizes).
     pub fn count(&self, mask: u32) -> usize {
-        self.mask.iter().filter(|&&m| m == mask).count()
+        use rayon::prelude::*;
+        let runs = self.mask.par_chunks(4096);
+        runs.map(|run| run.iter().map(|&m| usize::from(m == mask)).sum::<usize>())
+            .sum()
     }
 
     /// Where the holes ([`EMPTY`]) are, in order, found on all cores. Runs
@@ -140,15 +144,6 @@ impl Output {
                 holes.into_iter().flatten()
             })
             .collect()
-    }
-
-    /// How many holes there are, counted on all cores (a loop the compiler
-    /// vectorizes).
-    pub fn hole_count(&self) -> usize {
-        use rayon::prelude::*;
-        let runs = self.mask.par_chunks(4096);
-        runs.map(|run| run.iter().map(|&m| usize::from(m == EMPTY)).sum::<usize>())
-            .sum()
     }
 
     /// Every pixel with its index, for a CPU pass that writes each pixel
@@ -231,7 +226,7 @@ mod tests {
     use super::*;
 
     /// The holes found run by run are every hole, in order, and counted
-    /// alike: frames whose size is no multiple of the run, with no hole,
+    /// alike (each mask value is): frames whose size is no multiple of the run, with no hole,
     /// every pixel a hole, holes at both ends, and scattered ones.
     #[test]
     fn holes_are_every_empty_pixel_in_order() {
@@ -250,7 +245,11 @@ mod tests {
                 }
                 let expected: Vec<usize> = (0..n).filter(|&t| out.mask[t] == EMPTY).collect();
                 assert_eq!(out.holes(), expected, "{w}×{h} pattern {p}");
-                assert_eq!(out.hole_count(), expected.len(), "{w}×{h} pattern {p}");
+                for m in [EMPTY, WARPED, BACKGROUND, FILLED] {
+                    let plain = out.mask.iter().filter(|&&v| v == m).count();
+                    assert_eq!(out.count(m), plain, "{w}×{h} pattern {p} mask {m}");
+                }
+                assert_eq!(out.count(EMPTY), expected.len());
             }
         }
     }

@@ -371,8 +371,8 @@ enum Near {
     /// Every hole filled.
     Filled(usize),
     /// The texels of the next level would have taken it past the budget
-    /// (or there is no level 1, or holes are too many): nothing written,
-    /// the whole pyramid serves.
+    /// (or there is no level 1): nothing written, the whole pyramid
+    /// serves.
     GaveUp(usize),
 }
 
@@ -389,18 +389,12 @@ enum Near {
 ///
 /// It gives up, `out` untouched, before that would take it past `budget`
 /// texel reads (large holes read deep texels, each pulled from many;
-/// many holes, many texels), where there is no level 1, or where holes
-/// are more than a quarter of the budget (they cost at least a read each:
-/// a texel of level 1 is read by at most 16 holes, and reads four
-/// pixels). Giving up costs at most the budget, its planning (a read per
-/// texel planned) and the scan for holes.
+/// many holes, many texels), or where there is no level 1. Giving up
+/// costs at most the budget, its planning (a read per texel planned) and
+/// the scan for holes.
 fn fill_near(out: &mut Output, layout: Levels, budget: usize, scratch: &mut Scratch) -> Near {
     use rayon::prelude::*;
     if layout.count < 2 {
-        return Near::GaveUp(0);
-    }
-    // Counted first, listed only if few.
-    if out.hole_count() > budget / 4 {
         return Near::GaveUp(0);
     }
     let holes = out.holes();
@@ -516,13 +510,17 @@ fn make(made: &mut [Made], layout: Levels, out: &Output) {
 /// writes only holes); one with few, small holes makes only the texels
 /// they read (`fill_near`), with `scratch` kept from frame to frame.
 pub fn fill(out: &mut Output, levels: u32, scratch: &mut Scratch) {
-    use rayon::prelude::*;
-    if !out.mask.par_iter().any(|&m| m == EMPTY) {
+    let holes = out.count(EMPTY);
+    if holes == 0 {
         return;
     }
     let layout = layout(out.width, out.height, levels);
     let budget = out.mask.len() / NEAR_BUDGET;
-    if let Near::GaveUp(_) = fill_near(out, layout, budget, scratch) {
+    // Holes cost the near fill a read each at least (a texel of level 1 is
+    // read by at most 16 holes, and reads four pixels): more than a
+    // quarter of its budget go to the pyramid at once, without a list.
+    let few = holes <= budget / 4;
+    if !(few && matches!(fill_near(out, layout, budget, scratch), Near::Filled(_))) {
         pyramid(out, layout);
     }
 }
