@@ -349,10 +349,19 @@ impl<'a> Made<'a> {
     /// Texel `i` of the level (default where it is not made: never read,
     /// as the plan makes every texel read first).
     fn get(&self, i: usize) -> Texel {
-        match self.slot[i] {
-            0 => Texel::default(),
-            s => self.values[s as usize - 1],
+        self.place(i).map_or(Texel::default(), |p| self.values[p])
+    }
+
+    /// Texel `i`, made, becomes `t`.
+    fn set(&mut self, i: usize, t: Texel) {
+        if let Some(p) = self.place(i) {
+            self.values[p] = t;
         }
+    }
+
+    /// Where texel `i` is in the list, if it is made.
+    fn place(&self, i: usize) -> Option<usize> {
+        (self.slot[i] as usize).checked_sub(1)
     }
 }
 
@@ -433,7 +442,7 @@ fn fill_near(out: &mut Output, layout: Levels, budget: usize, scratch: &mut Scra
             .map(|&i| push_texel(level.get(i), parent(i)))
             .collect();
         for (&i, t) in empty[k].iter().zip(pushed) {
-            level.values[level.slot[i] as usize - 1] = t;
+            level.set(i, t);
         }
     }
     // The holes from level 1: read first, then written, as the pyramid is
