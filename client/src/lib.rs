@@ -3,7 +3,8 @@
 //! * [`connect`] and [`tls`]: the QUIC session with a pinned certificate;
 //! * [`reconnect`]: a stream that reconnects when its server goes away;
 //! * [`impair`]: a lossy, jittery relay for tests and demos;
-//! * [`present`]: the presentation loop, headless or into [`window`];
+//! * [`present`]: the presentation loop, headless or into [`window`],
+//!   which display-encodes on its GPU ([`display`]);
 //! * [`frame_writer`]: writes the presented frames (a dump, PNGs) off the
 //!   presenting thread;
 //! * [`latch`]: when late input takes the viewer's pose, and what
@@ -17,6 +18,7 @@
 
 pub mod connect;
 pub mod demo;
+pub mod display;
 pub mod eval;
 pub mod frame_writer;
 pub mod impair;

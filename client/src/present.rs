@@ -440,7 +440,7 @@ pub async fn run_headless(
                 slot.kind != SlotKind::Rendered && slot.kind != SlotKind::Repeated
                     || pusher.last == Some(slot.source.id)
             });
-            let (image, ready_at) = produce(
+            let (mut image, ready_at) = produce(
                 &slot,
                 &mut generator,
                 &kept,
@@ -477,7 +477,7 @@ pub async fn run_headless(
                         at: Duration::from_micros(e.client_time_us),
                     }),
             };
-            if let (Some(sink), Some(image)) = (&config.window, &image) {
+            if let (Some(sink), Some(image)) = (&config.window, &mut image) {
                 let link = session.stats().session;
                 let mut stats = overlay(
                     &accounting,
@@ -506,7 +506,13 @@ pub async fn run_headless(
                         stats += crate::viewer::BINDINGS;
                     }
                 }
-                if !send_to_window(sink, image, stats) {
+                // The colour is read later only by the writer.
+                let color = if writer.is_some() {
+                    image.color.clone()
+                } else {
+                    std::mem::take(&mut image.color)
+                };
+                if !send_to_window(sink, image.meta.size, color, stats) {
                     // The window was closed: the session ends.
                     break;
                 }
@@ -777,22 +783,18 @@ fn overlay(
     )
 }
 
-/// Display-encodes a frame and hands it to the window; false once the
-/// window is gone.
-fn send_to_window(sink: &crate::window::Sink, frame: &Frame, stats: String) -> bool {
-    let size = frame.meta.size;
-    let Some(image) = framegen::display_encode(size.width, size.height, &frame.color) else {
-        return true;
-    };
-    let rgba = image
-        .to_rgb8()
-        .chunks_exact(3)
-        .flat_map(|p| [p[0], p[1], p[2], 255])
-        .collect();
+/// Hands a frame's colour (linear: the window display-encodes it on its
+/// GPU) to the window; false once the window is gone.
+fn send_to_window(
+    sink: &crate::window::Sink,
+    size: protocol::FrameSize,
+    color: Vec<[half::f16; 4]>,
+    stats: String,
+) -> bool {
     sink.send_event(crate::window::Event::Frame {
         width: size.width,
         height: size.height,
-        rgba,
+        color,
         stats,
     })
     .is_ok()

@@ -1,13 +1,13 @@
 //! The window presenter: a winit window with a wgpu surface showing the
-//! presented frames (display-encoded by the presenter: exposure 1,
-//! Reinhard, sRGB) and a stats overlay in the spirit of Moonlight's,
+//! presented frames (linear HDR colour, display-encoded on the window's
+//! GPU: exposure 1, Reinhard, sRGB; [`crate::display`]) and a stats overlay in the spirit of Moonlight's,
 //! toggled with `O` (text by `glyphon`). `Esc` or closing the window ends
 //! the session. In an interactive session the mouse and keys drive the
 //! viewer ([`crate::viewer::LiveViewer`]: drag with the left button to
 //! look, W/A/S/D to move, Space and C up and down, Shift to run).
 //!
-//! Each frame is drawn into an offscreen target of the surface's format
-//! (image, then overlay), which is then drawn onto the surface; the same
+//! Each frame is display-encoded once, as it arrives, then drawn into an
+//! offscreen target of the surface's format (image, then overlay), which is then drawn onto the surface; the same
 //! target serves `--screenshot`. The presenter loop runs on its own thread
 //! and hands frames over through the event loop proxy.
 
@@ -20,19 +20,21 @@ use winit::event_loop::{ActiveEventLoop, EventLoop, EventLoopProxy};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
+use crate::display::DisplayPass;
 use crate::viewer::{LiveViewer, MoveKey};
 
 /// What the presenter sends the window.
 #[derive(Debug)]
 pub enum Event {
-    /// A presented frame: RGBA8, display-encoded, and the overlay text.
+    /// A presented frame: its linear colour, and the overlay text.
     Frame {
         /// Width in pixels.
         width: u32,
         /// Height in pixels.
         height: u32,
-        /// RGBA8 pixels.
-        rgba: Vec<u8>,
+        /// Linear RGBA, `width × height` pixels, row-major (the frame's
+        /// own colour: the window applies the display transform).
+        color: Vec<[half::f16; 4]>,
         /// Overlay text.
         stats: String,
     },
@@ -59,7 +61,8 @@ pub fn run(
     let mut app = App {
         window: None,
         gfx: None,
-        frame: None,
+        pending: None,
+        stats: String::new(),
         overlay: true,
         screenshot,
         error: None,
@@ -76,7 +79,11 @@ pub fn run(
 struct App {
     window: Option<Arc<Window>>,
     gfx: Option<Gfx>,
-    frame: Option<(u32, u32, Vec<u8>, String)>,
+    /// The newest frame not yet on the window's device (width, height,
+    /// colour).
+    pending: Option<(u32, u32, Vec<[half::f16; 4]>)>,
+    /// The newest frame's overlay text.
+    stats: String,
     overlay: bool,
     screenshot: Option<PathBuf>,
     error: Option<anyhow::Error>,
@@ -111,11 +118,13 @@ impl App {
     }
 
     fn draw(&mut self) -> anyhow::Result<()> {
-        let (Some(gfx), Some((w, h, rgba, stats))) = (self.gfx.as_mut(), self.frame.as_ref())
-        else {
+        let Some(gfx) = self.gfx.as_mut() else {
             return Ok(());
         };
-        gfx.draw(*w, *h, rgba, self.overlay.then_some(stats.as_str()))
+        if let Some((w, h, color)) = self.pending.take() {
+            gfx.show(w, h, &color)?;
+        }
+        gfx.draw(self.overlay.then_some(self.stats.as_str()))
     }
 }
 
@@ -153,10 +162,11 @@ impl ApplicationHandler<Event> for App {
             Event::Frame {
                 width,
                 height,
-                rgba,
+                color,
                 stats,
             } => {
-                self.frame = Some((width, height, rgba, stats));
+                self.pending = Some((width, height, color));
+                self.stats = stats;
                 if let Some(w) = &self.window {
                     w.request_redraw();
                 }
@@ -269,7 +279,11 @@ struct Gfx {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
-    image: Option<(wgpu::Texture, wgpu::BindGroup, u32, u32)>,
+    /// The display transform into the encoded image's format.
+    display: DisplayPass,
+    /// The shown frame on the device, and its encoded image bound for the
+    /// blit.
+    image: Option<(crate::display::Image, wgpu::BindGroup)>,
     target: (wgpu::Texture, wgpu::BindGroup),
     text: Text,
 }
@@ -338,16 +352,7 @@ impl Gfx {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("image"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                crate::display::image_entry(0, true),
                 wgpu::BindGroupLayoutEntry {
                     binding: 1,
                     visibility: wgpu::ShaderStages::FRAGMENT,
@@ -360,38 +365,24 @@ impl Gfx {
             label: Some("blit"),
             source: wgpu::ShaderSource::Wgsl(BLIT_WGSL.into()),
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("blit"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("blit"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs"),
-                compilation_options: Default::default(),
-                targets: &[Some(config.format.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline =
+            crate::display::full_screen(device, "blit", &module, &layout, "fs", config.format);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             mag_filter: wgpu::FilterMode::Linear,
             min_filter: wgpu::FilterMode::Linear,
             ..Default::default()
         });
         let target = Self::make_target(device, &layout, &sampler, &config);
+        // Encoded into sRGB where the surface is: sampled through it the
+        // image decodes to linear, which the surface encodes again.
+        let display = DisplayPass::new(
+            device,
+            if config.format.is_srgb() {
+                wgpu::TextureFormat::Rgba8UnormSrgb
+            } else {
+                wgpu::TextureFormat::Rgba8Unorm
+            },
+        );
         let text = Text::new(device, queue, config.format);
         scope.finish()?;
         Ok(Self {
@@ -401,6 +392,7 @@ impl Gfx {
             pipeline,
             layout,
             sampler,
+            display,
             image: None,
             target,
             text,
@@ -413,22 +405,15 @@ impl Gfx {
         sampler: &wgpu::Sampler,
         config: &wgpu::SurfaceConfiguration,
     ) -> (wgpu::Texture, wgpu::BindGroup) {
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("window target"),
-            size: wgpu::Extent3d {
-                width: config.width,
-                height: config.height,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: config.format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+        let texture = gpu_device::texture_2d(
+            device,
+            "window target",
+            (config.width, config.height),
+            config.format,
+            wgpu::TextureUsages::RENDER_ATTACHMENT
                 | wgpu::TextureUsages::TEXTURE_BINDING
                 | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
+        );
         let group = bind(device, layout, sampler, &texture);
         (texture, group)
     }
@@ -444,45 +429,42 @@ impl Gfx {
             Self::make_target(&self.gpu.device, &self.layout, &self.sampler, &self.config);
     }
 
-    fn draw(&mut self, w: u32, h: u32, rgba: &[u8], stats: Option<&str>) -> anyhow::Result<()> {
-        // The presenter's bytes are sRGB-encoded: sampled through an sRGB
-        // view they decode to linear, which an sRGB target encodes again.
-        let format = if self.config.format.is_srgb() {
-            wgpu::TextureFormat::Rgba8UnormSrgb
-        } else {
-            wgpu::TextureFormat::Rgba8Unorm
-        };
-        if self.image.as_ref().is_none_or(|i| (i.2, i.3) != (w, h)) {
-            let texture = self.gpu.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("presented frame"),
-                size: wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            });
-            let group = bind(&self.gpu.device, &self.layout, &self.sampler, &texture);
-            self.image = Some((texture, group, w, h));
+    /// Puts a frame on the device and display-encodes it there (the
+    /// presenter's bytes are linear HDR; see [`crate::display`]).
+    fn show(&mut self, w: u32, h: u32, color: &[[half::f16; 4]]) -> anyhow::Result<()> {
+        if w == 0 || h == 0 {
+            return Ok(());
         }
-        let Some((texture, image_group, ..)) = &self.image else {
+        self.gpu.require_texture("a presented frame", w, h)?;
+        if self
+            .image
+            .as_ref()
+            .is_none_or(|(i, _)| (i.width, i.height) != (w, h))
+        {
+            let image = self.display.image(&self.gpu.device, w, h);
+            let group = bind(
+                &self.gpu.device,
+                &self.layout,
+                &self.sampler,
+                &image.encoded,
+            );
+            self.image = Some((image, group));
+        }
+        let Some((image, _)) = &self.image else {
             return Ok(());
         };
-        self.gpu.queue.write_texture(
-            texture.as_image_copy(),
-            rgba,
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(4 * w),
-                rows_per_image: Some(h),
-            },
-            texture.size(),
-        );
+        self.display.upload(&self.gpu.queue, image, color)?;
+        let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+        self.display.encode(&mut encoder, image);
+        self.gpu.queue.submit([encoder.finish()]);
+        Ok(())
+    }
+
+    /// Draws the shown frame and the overlay (`stats`) onto the surface.
+    fn draw(&mut self, stats: Option<&str>) -> anyhow::Result<()> {
+        let Some((_, image_group)) = &self.image else {
+            return Ok(());
+        };
         if let Some(stats) = stats {
             self.text.prepare(
                 &self.gpu.device,
@@ -495,7 +477,7 @@ impl Gfx {
         let target_view = self.target.0.create_view(&Default::default());
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
         {
-            let mut pass = begin(&mut encoder, &target_view);
+            let mut pass = crate::display::begin(&mut encoder, &target_view);
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, image_group, &[]);
             pass.draw(0..3, 0..1);
@@ -517,7 +499,7 @@ impl Gfx {
         };
         if let Some(frame) = &frame {
             let view = frame.texture.create_view(&Default::default());
-            let mut pass = begin(&mut encoder, &view);
+            let mut pass = crate::display::begin(&mut encoder, &view);
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.target.1, &[]);
             pass.draw(0..3, 0..1);
@@ -538,48 +520,21 @@ impl Gfx {
     /// Saves the offscreen target (what the window shows) as a PNG.
     fn save(&self, path: &std::path::Path) -> anyhow::Result<()> {
         let (w, h) = (self.config.width, self.config.height);
-        let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let buffer = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("screenshot"),
-            size: u64::from(row) * u64::from(h),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
-        encoder.copy_texture_to_buffer(
-            self.target.0.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(h),
-                },
-            },
-            self.target.0.size(),
-        );
-        self.gpu.queue.submit([encoder.finish()]);
-        let slice = buffer.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        self.gpu.device.poll(wgpu::PollType::Wait {
-            submission_index: None,
-            timeout: None,
-        })?;
-        let data = slice.get_mapped_range()?;
+        let data = crate::display::read_back(&self.gpu, &self.target.0)?;
         let bgra = matches!(
             self.config.format,
             wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
         );
-        let mut rgb = Vec::with_capacity((w * h * 3) as usize);
-        for y in 0..h as usize {
-            for px in data[y * row as usize..][..4 * w as usize].chunks_exact(4) {
+        let rgb: Vec<u8> = data
+            .chunks_exact(4)
+            .flat_map(|px| {
                 if bgra {
-                    rgb.extend_from_slice(&[px[2], px[1], px[0]]);
+                    [px[2], px[1], px[0]]
                 } else {
-                    rgb.extend_from_slice(&px[..3]);
+                    [px[0], px[1], px[2]]
                 }
-            }
-        }
+            })
+            .collect();
         image::save_buffer(path, &rgb, w, h, image::ExtendedColorType::Rgb8)?;
         Ok(())
     }
@@ -593,28 +548,6 @@ fn bind(
 ) -> wgpu::BindGroup {
     let view = texture.create_view(&Default::default());
     gpu_device::view_and_sampler(device, "image", layout, &view, sampler)
-}
-
-fn begin<'a>(
-    encoder: &'a mut wgpu::CommandEncoder,
-    view: &'a wgpu::TextureView,
-) -> wgpu::RenderPass<'a> {
-    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-        label: Some("window"),
-        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-            view,
-            depth_slice: None,
-            resolve_target: None,
-            ops: wgpu::Operations {
-                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                store: wgpu::StoreOp::Store,
-            },
-        })],
-        depth_stencil_attachment: None,
-        timestamp_writes: None,
-        occlusion_query_set: None,
-        multiview_mask: None,
-    })
 }
 
 impl Text {

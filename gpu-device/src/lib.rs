@@ -346,6 +346,31 @@ impl std::fmt::Debug for OneLine {
     }
 }
 
+/// A plain 2D texture (one mip level, one sample, no other view formats):
+/// the renderer's targets and shadow map, the window's images.
+pub fn texture_2d(
+    device: &wgpu::Device,
+    label: &str,
+    (width, height): (u32, u32),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
 /// A bind group of a texture view (binding 0) and its sampler (binding 1),
 /// the layout of a sampled image: the renderer's shadow map, the window's
 /// frame.

@@ -709,20 +709,7 @@ fn shadow_resources(
     side: Option<u32>,
 ) -> (Option<wgpu::Texture>, wgpu::BindGroup) {
     let texture = |label, side, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: side,
-                height: side,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: SHADOW_FORMAT,
-            usage,
-            view_formats: &[],
-        })
+        gpu_device::texture_2d(device, label, (side, side), SHADOW_FORMAT, usage)
     };
     let map = side.map(|side| {
         texture(

@@ -78,29 +78,6 @@ pub struct Targets {
     readback: [wgpu::Buffer; 4],
 }
 
-fn texture(
-    gpu: &Gpu,
-    label: &str,
-    size: (u32, u32),
-    format: wgpu::TextureFormat,
-    usage: wgpu::TextureUsages,
-) -> wgpu::Texture {
-    gpu.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d {
-            width: size.0,
-            height: size.1,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format,
-        usage,
-        view_formats: &[],
-    })
-}
-
 /// Bytes per row of a readback buffer, padded to wgpu's copy alignment.
 fn padded_row(width: u32, bytes_per_pixel: u32) -> u32 {
     let row = width * bytes_per_pixel;
@@ -133,12 +110,18 @@ impl Targets {
         });
         Self {
             size,
-            color: texture(gpu, "color", size, COLOR_FORMAT, rt),
-            linear_depth: texture(gpu, "linear depth", size, LINEAR_DEPTH_FORMAT, rt),
-            motion: texture(gpu, "motion", size, MOTION_FORMAT, rt),
-            ids: texture(gpu, "ids", size, ID_FORMAT, rt),
-            depth: texture(
-                gpu,
+            color: gpu_device::texture_2d(&gpu.device, "color", size, COLOR_FORMAT, rt),
+            linear_depth: gpu_device::texture_2d(
+                &gpu.device,
+                "linear depth",
+                size,
+                LINEAR_DEPTH_FORMAT,
+                rt,
+            ),
+            motion: gpu_device::texture_2d(&gpu.device, "motion", size, MOTION_FORMAT, rt),
+            ids: gpu_device::texture_2d(&gpu.device, "ids", size, ID_FORMAT, rt),
+            depth: gpu_device::texture_2d(
+                &gpu.device,
                 "depth",
                 size,
                 DEPTH_FORMAT,
