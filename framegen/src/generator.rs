@@ -364,6 +364,37 @@ impl FrameGenerator {
         alpha: f64,
         source: CameraSource,
     ) -> Result<Generated, FramegenError> {
+        let (job, meta) = self.job(alpha, source)?;
+        let (packed, output) = self.backend.generate_packed(&job)?;
+        assemble(meta, alpha, packed, output)
+    }
+
+    /// The device the generator runs on, if it runs on one.
+    pub fn device(&self) -> Option<&Arc<GpuContext>> {
+        self.backend.device()
+    }
+
+    /// A generated frame at `alpha` with the camera from `source`, left on
+    /// the generator's device: its colour (linear RGBA `f16`, bit for bit
+    /// the colour [`FrameGenerator::generate_with`] returns) is written
+    /// into `target`, an `Rgba16Float` texture of the frame's size on
+    /// [`FrameGenerator::device`] with `COPY_DST` usage, and nothing is
+    /// read back (issue 15 §2: a presenter on that device shows it from
+    /// there). Returns the frame's header; a generator on the CPU refuses.
+    pub fn generate_to(
+        &mut self,
+        alpha: f64,
+        source: CameraSource,
+        target: &wgpu::Texture,
+    ) -> Result<FrameMeta, FramegenError> {
+        let (job, meta) = self.job(alpha, source)?;
+        self.backend.generate_to(&job, target)?;
+        Ok(meta)
+    }
+
+    /// The job of a generated frame at `alpha` with the camera from
+    /// `source`, and the frame's header.
+    fn job(&self, alpha: f64, source: CameraSource) -> Result<(Job, FrameMeta), FramegenError> {
         let method = self.settings.method.descriptor();
         let max_alpha = method.max_alpha(self.settings.max_alpha);
         if !(alpha.is_finite() && alpha >= 0.0 && alpha <= max_alpha) {
@@ -439,8 +470,7 @@ impl FrameGenerator {
             host_processing: Duration::ZERO,
             cut: false,
         };
-        let (packed, output) = self.backend.generate_packed(&job)?;
-        assemble(meta, alpha, packed, output)
+        Ok((job, meta))
     }
 }
 

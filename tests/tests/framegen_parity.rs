@@ -692,3 +692,109 @@ fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
         }
     }
 }
+
+/// The bytes of a texture of 8 bytes a pixel (rows unpadded).
+fn texture_bytes(ctx: &GpuContext, texture: &wgpu::Texture) -> Vec<u8> {
+    let (w, h) = (texture.width(), texture.height());
+    let row = (8 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let buffer = ctx.staging("texture read-back", u64::from(row) * u64::from(h));
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(row),
+                rows_per_image: Some(h),
+            },
+        },
+        texture.size(),
+    );
+    ctx.queue.submit([encoder.finish()]);
+    ctx.map_read(&buffer, u64::from(row) * u64::from(h), |bytes| {
+        bytes
+            .chunks_exact(row as usize)
+            .flat_map(|r| &r[..8 * w as usize])
+            .copied()
+            .collect()
+    })
+    .unwrap()
+}
+
+/// Issue 15 §2: a generated frame left on the device (`generate_to`, for
+/// a presenter on that device) holds bit for bit the colour the same
+/// generation reads back, for every method, at a width whose rows copy
+/// in one go (128 pixels: 1024 bytes) and one whose rows do not (100
+/// pixels: 800 bytes, copied row by row). A texture that does not fit
+/// and a generator on the CPU are refused with typed errors.
+#[test]
+fn a_frame_left_on_the_device_is_the_frame_read_back() {
+    let ctx = ctx();
+    for size in [FrameSize::new(128, 72), FrameSize::new(100, 60)] {
+        let all = tests::render_scene("pan", size, 60.0, 30..38);
+        let fs = framegen::decimate::decimate(&all, 2);
+        let texture = gpu_device::texture_2d(
+            &ctx.device,
+            "generated frame",
+            (size.width, size.height),
+            wgpu::TextureFormat::Rgba16Float,
+            wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
+        );
+        for method in Method::ALL {
+            let mut g = FrameGenerator::gpu(Settings::for_method(method), ctx.clone()).unwrap();
+            assert!(g.device().is_some());
+            for f in &fs {
+                g.push(f).unwrap();
+            }
+            let read = g.generate(0.5).unwrap();
+            let meta = g
+                .generate_to(0.5, framegen::CameraSource::Extrapolated, &texture)
+                .unwrap();
+            assert_eq!(meta, read.frame.meta, "{method} {size:?}");
+            let on_device = texture_bytes(&ctx, &texture);
+            let expected: &[u8] = bytemuck::cast_slice(&read.frame.color);
+            assert_eq!(on_device.len(), expected.len());
+            let differ = on_device
+                .iter()
+                .zip(expected)
+                .filter(|(a, b)| a != b)
+                .count();
+            assert_eq!(differ, 0, "{method} {size:?}: {differ} bytes differ");
+            // A texture of another size is refused, and the generator
+            // still generates.
+            let small = gpu_device::texture_2d(
+                &ctx.device,
+                "too small",
+                (size.width - 1, size.height),
+                wgpu::TextureFormat::Rgba16Float,
+                wgpu::TextureUsages::COPY_DST,
+            );
+            let err = g
+                .generate_to(0.5, framegen::CameraSource::Extrapolated, &small)
+                .unwrap_err();
+            assert!(
+                matches!(err, framegen::FramegenError::Target(..)),
+                "{method}: {err}"
+            );
+            assert_eq!(g.generate(0.5).unwrap().frame.color, read.frame.color);
+        }
+    }
+    let mut cpu = FrameGenerator::cpu(Settings::for_method(Method::Gffe)).unwrap();
+    assert!(cpu.device().is_none());
+    let fs = frames("pan", 30, 2);
+    for f in &fs {
+        cpu.push(f).unwrap();
+    }
+    let texture = gpu_device::texture_2d(
+        &ctx.device,
+        "generated frame",
+        (SIZE.width, SIZE.height),
+        wgpu::TextureFormat::Rgba16Float,
+        wgpu::TextureUsages::COPY_DST,
+    );
+    assert!(matches!(
+        cpu.generate_to(0.5, framegen::CameraSource::Extrapolated, &texture),
+        Err(framegen::FramegenError::NotOnDevice(_))
+    ));
+}

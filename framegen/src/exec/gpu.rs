@@ -436,6 +436,75 @@ impl GpuBackend {
         let g = self.take_generation()?;
         let n = u64::from(g.tn);
         let [color_bytes, depth_bytes, motion_bytes, mask_bytes] = pack::packed_bytes(n);
+        let (color, mask) = self.pack(&g)?;
+        let parts = [
+            (&color, color_bytes),
+            (&g.depth, depth_bytes),
+            (&g.motion, motion_bytes),
+            (&mask, mask_bytes),
+        ];
+        let (w, h) = g.size;
+        self.read_back(&parts, |bytes| pack::unpack(bytes, w, h))
+    }
+
+    /// Ends the frame with its packed colour copied into `target` on this
+    /// device, in the generation's own submission; nothing is read back.
+    fn finish_to(&mut self, target: &wgpu::Texture) -> Result<(), FramegenError> {
+        let g = self.take_generation()?;
+        let (w, h) = g.size;
+        let (tw, th, format) = (target.width(), target.height(), target.format());
+        if (tw, th, format) != (w, h, wgpu::TextureFormat::Rgba16Float)
+            || !target.usage().contains(wgpu::TextureUsages::COPY_DST)
+        {
+            return Err(FramegenError::Target(w, h, (tw, th, format)));
+        }
+        let (color, _) = self.pack(&g)?;
+        let ctx = &*self.ctx;
+        let encoder = self
+            .rec
+            .encoder
+            .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
+        // A buffer-to-texture copy takes rows 256-byte aligned: the packed
+        // rows (8 bytes a pixel, tight) in one copy where they are, one
+        // copy a row where not.
+        let row = u64::from(w) * 8;
+        let rows: Vec<(u32, u32)> = if row % u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) == 0 {
+            vec![(0, h)]
+        } else {
+            (0..h).map(|y| (y, 1)).collect()
+        };
+        for (y, count) in rows {
+            encoder.copy_buffer_to_texture(
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &color,
+                    // One row needs (and may have) no stride.
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: u64::from(y) * row,
+                        bytes_per_row: (count > 1).then_some(row as u32),
+                        rows_per_image: (count > 1).then_some(count),
+                    },
+                },
+                wgpu::TexelCopyTextureInfo {
+                    texture: target,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d { x: 0, y, z: 0 },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::Extent3d {
+                    width: w,
+                    height: count,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        self.rec.flush(ctx)
+    }
+
+    /// Records the pack kernel over `g`'s output; its packed colour and
+    /// mask buffers (depth and motion are packed in place).
+    fn pack(&mut self, g: &Generation) -> Result<(wgpu::Buffer, wgpu::Buffer), FramegenError> {
+        let n = u64::from(g.tn);
+        let [color_bytes, _, _, mask_bytes] = pack::packed_bytes(n);
         let (ctx, pool) = (&*self.ctx, &self.rec.pool);
         let s = &mut self.scratch;
         let color = ensure(ctx, pool, &mut s.packed_color, "packed color", color_bytes).clone();
@@ -448,14 +517,7 @@ impl GpuBackend {
         self.rec.pass(ctx, Pass::Pack, |gpu, enc| {
             kernels.pack.encode(gpu, enc, g.tn, g.out(), packed);
         })?;
-        let parts = [
-            (&color, color_bytes),
-            (&g.depth, depth_bytes),
-            (&g.motion, motion_bytes),
-            (&mask, mask_bytes),
-        ];
-        let (w, h) = g.size;
-        self.read_back(&parts, |bytes| pack::unpack(bytes, w, h))
+        Ok((color, mask))
     }
 
     /// Copies the first bytes of each buffer, one after the other, into
@@ -574,6 +636,17 @@ impl Backend for GpuBackend {
         self.generating(job, |b| {
             crate::pipeline::passes(b, job)?;
             Ok((b.finish_packed()?, None))
+        })
+    }
+
+    fn device(&self) -> Option<&Arc<GpuContext>> {
+        Some(&self.ctx)
+    }
+
+    fn generate_to(&mut self, job: &Job, target: &wgpu::Texture) -> Result<(), FramegenError> {
+        self.generating(job, |b| {
+            crate::pipeline::passes(b, job)?;
+            b.finish_to(target)
         })
     }
 

@@ -68,16 +68,32 @@ impl GpuContext {
         let gpu = gpu_device::Device::open(
             adapter,
             &wgpu::DeviceDescriptor {
-                label: Some("framegen"),
-                // Timestamp queries where offered (profiling on hardware).
-                required_features: adapter.features() & timestamps::FEATURES,
                 required_limits: limits,
-                experimental_features: wgpu::ExperimentalFeatures::disabled(),
-                memory_hints: wgpu::MemoryHints::Performance,
-                trace: wgpu::Trace::Off,
+                ..Self::descriptor(adapter)
             },
         )?;
-        Ok(Arc::new(Self { gpu }))
+        Ok(Self::from_device(gpu))
+    }
+
+    /// What the generator asks of a device on `adapter`: the adapter's
+    /// limits, and timestamp queries where offered (profiling on hardware).
+    /// A device opened with it elsewhere (a window's, to present from the
+    /// device that generates) serves the generator as one of its own.
+    pub fn descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
+        wgpu::DeviceDescriptor {
+            label: Some("framegen"),
+            required_features: adapter.features() & timestamps::FEATURES,
+            required_limits: adapter.limits(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }
+    }
+
+    /// The generator's context on a device opened elsewhere with
+    /// [`GpuContext::descriptor`].
+    pub fn from_device(gpu: gpu_device::Device) -> Arc<Self> {
+        Arc::new(Self { gpu })
     }
 
     /// Blocks until every submitted command buffer has finished; an error

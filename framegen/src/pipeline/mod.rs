@@ -287,6 +287,18 @@ pub trait Backend: Send {
         let out = self.generate(job)?;
         Ok((crate::passes::common::pack::pack(&out), Some(out)))
     }
+    /// Makes a generated frame and writes its colour, as
+    /// [`Backend::generate_packed`] packs it (linear RGBA `f16`), into
+    /// `target` (`Rgba16Float`, the frame's size) on the backend's own
+    /// device, where a presenter on that device shows it: nothing is read
+    /// back. A backend without a device refuses.
+    fn generate_to(&mut self, _job: &Job, _target: &wgpu::Texture) -> Result<(), FramegenError> {
+        Err(FramegenError::NotOnDevice(self.name()))
+    }
+    /// The device the backend runs on (none for the CPU reference).
+    fn device(&self) -> Option<&Arc<crate::gpu::GpuContext>> {
+        None
+    }
     /// Drops all history.
     fn reset(&mut self);
     /// Wall times of the passes of the last `ingest` + `generate`.
