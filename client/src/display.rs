@@ -45,6 +45,15 @@ pub struct Image {
     pub encoded: wgpu::Texture,
 }
 
+impl Image {
+    /// The linear colour the pass reads (`SOURCE_FORMAT`, copy
+    /// destination): a generator on the same device writes its frames
+    /// here ([`framegen::FrameGenerator::generate_to`]).
+    pub fn source(&self) -> &wgpu::Texture {
+        &self.source
+    }
+}
+
 impl DisplayPass {
     /// The pass into `format`, an 8-bit colour format: an sRGB one applies
     /// the OETF itself as it stores, so the shader leaves it out there.

@@ -2,6 +2,7 @@
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use clap::{Args, Parser, Subcommand};
@@ -546,6 +547,10 @@ fn report_relay(relay: Option<&Relay>) {
     }
 }
 
+/// How long the presenter waits for the window's device before it opens
+/// one of its own.
+const WINDOW_DEVICE_TIMEOUT: Duration = Duration::from_secs(20);
+
 /// `client run`: the demo, in a window when there is a display.
 fn run(args: RunArgs) -> anyhow::Result<()> {
     let display =
@@ -568,19 +573,21 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
         None
     };
     let Some(event_loop) = event_loop else {
-        return session(args, None, None);
+        return session(args, None, None, None);
     };
     let proxy = event_loop.create_proxy();
     let screenshot = args.screenshot.clone();
     // An interactive window is driven by its mouse and keys.
     let live = args.interactive.then(client::viewer::LiveViewer::default);
     let keys = live.clone();
+    // The window's device, for a generator to share.
+    let (share, shared) = std::sync::mpsc::sync_channel(1);
     let worker = std::thread::spawn(move || {
-        let result = session(args, Some(proxy.clone()), live);
+        let result = session(args, Some(proxy.clone()), live, Some(shared));
         let _ = proxy.send_event(client::window::Event::Done);
         result
     });
-    let shown = client::window::run(event_loop, screenshot, keys);
+    let shown = client::window::run(event_loop, screenshot, keys, Some(share));
     let result = worker
         .join()
         .map_err(|_| anyhow::anyhow!("the presenter thread panicked"))?;
@@ -593,6 +600,7 @@ fn session(
     args: RunArgs,
     window: Option<client::window::Sink>,
     live: Option<client::viewer::LiveViewer>,
+    shared: Option<std::sync::mpsc::Receiver<client::window::Shared>>,
 ) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -643,9 +651,20 @@ fn session(
             late: args.late_input == "on",
         });
         let (mut session, relay) = connect_impaired(config, args.impair, args.reconnect_for).await?;
+        // In a window, generation runs on the window's device where the
+        // window opened one (waited for here, briefly: it opens as the
+        // stream starts), so that generated frames are shown from the
+        // device that made them; otherwise on a device of its own.
+        let shared = match (args.backend.as_str(), shared) {
+            ("cpu", _) | (_, None) => None,
+            (_, Some(rx)) => rx.recv_timeout(WINDOW_DEVICE_TIMEOUT).ok(),
+        };
         let gpu = match args.backend.as_str() {
             "cpu" => None,
-            wanted => match client::demo::gpu() {
+            wanted => match shared
+                .as_ref()
+                .map_or_else(client::demo::gpu, |s| Ok(s.ctx.clone()))
+            {
                 Ok(g) if wanted == "wgpu" || g.adapter_info.device_type != wgpu::DeviceType::Cpu => {
                     Some(g)
                 }
@@ -686,6 +705,8 @@ fn session(
             shading: !args.no_shading,
             every_stage: args.every_stage,
             viewer,
+            // Only where the generator runs on it.
+            shared: shared.filter(|s| gpu.as_ref().is_some_and(|g| Arc::ptr_eq(g, &s.ctx))),
         };
         let report = run_headless(&mut session, &config, gpu).await?;
         session.close().await;

@@ -35,7 +35,7 @@ use framegen::accounting::{Accounting, InputShown, Percentiles, Record, Summary}
 use framegen::schedule::{FrameReady, Policy, ScheduleConfig, Scheduler, Slot, SlotKind};
 use framegen::{CameraSource, FrameGenerator, GpuContext, Method, PushOutcome, Settings};
 use protocol::wire::{Input, InputEcho};
-use protocol::{Frame, Pose};
+use protocol::{Frame, FrameMeta, Pose};
 use serde::Serialize;
 
 use crate::frame_writer::{DumpSink, FrameSink, FrameWriter, PngSink};
@@ -74,6 +74,10 @@ pub struct PresentConfig {
     /// An interactive run's viewer: the client sends its input every
     /// vsync (issue 20).
     pub viewer: Option<ViewerConfig>,
+    /// The window's device and display transform, where the generator
+    /// runs on that device: generated frames are then handed to the
+    /// window there, never read back (unless a dump or PNGs need them).
+    pub shared: Option<crate::window::Shared>,
 }
 
 /// The viewer of an interactive run (issue 20).
@@ -134,6 +138,7 @@ impl Default for PresentConfig {
             shading: true,
             every_stage: false,
             viewer: None,
+            shared: None,
         }
     }
 }
@@ -194,6 +199,9 @@ pub struct Report {
     pub plan: framegen::pipeline::plan::Plan,
     /// The viewer's camera against what was shown (issue 20).
     pub viewer: ViewerReport,
+    /// Generated frames handed to the window on the device that made
+    /// them, never read back (issue 15 §2; [`PresentConfig::shared`]).
+    pub on_device: u64,
 }
 
 /// How a run's displayed camera followed the viewer (issue 20).
@@ -299,6 +307,20 @@ pub async fn run_headless(
         let capacity = FrameWriter::capacity_for(session.welcome.size);
         Some(FrameWriter::start(sinks, capacity, "presentation")?)
     };
+    // Generated frames stay on the device where the window shares the
+    // generator's and nothing on the host reads them.
+    let mut on_device = config
+        .shared
+        .clone()
+        .filter(|s| {
+            config.window.is_some()
+                && writer.is_none()
+                && generator.device().is_some_and(|d| Arc::ptr_eq(d, &s.ctx))
+        })
+        .map(DeviceFrames::new);
+    if on_device.is_some() {
+        tracing::info!("generated frames stay on the device the window shows them from");
+    }
     let mut scheduler = Scheduler::new(schedule);
     // A slot is prepared after its vsync and shown at the next one at the
     // earliest: a queue of one display interval, for rendered frames shown
@@ -442,7 +464,7 @@ pub async fn run_headless(
             });
             let (mut image, ready_at) = produce(
                 &slot,
-                &mut generator,
+                (&mut generator, on_device.as_mut()),
                 &kept,
                 (&mut generation, &mut passes),
                 (start, warp.map(|n| n.pose)),
@@ -477,7 +499,7 @@ pub async fn run_headless(
                         at: Duration::from_micros(e.client_time_us),
                     }),
             };
-            if let (Some(sink), Some(image)) = (&config.window, &mut image) {
+            if let (Some(sink), Some(shown)) = (&config.window, &mut image) {
                 let link = session.stats().session;
                 let mut stats = overlay(
                     &accounting,
@@ -506,13 +528,24 @@ pub async fn run_headless(
                         stats += crate::viewer::BINDINGS;
                     }
                 }
-                // The colour is read later only by the writer.
-                let color = if writer.is_some() {
-                    image.color.clone()
-                } else {
-                    std::mem::take(&mut image.color)
+                let event = match shown {
+                    Shown::Device(_, image) => crate::window::Event::Encoded {
+                        image: image.clone(),
+                        stats,
+                    },
+                    // The colour is read later only by the writer.
+                    Shown::Host(frame) => crate::window::Event::Frame {
+                        width: frame.meta.size.width,
+                        height: frame.meta.size.height,
+                        color: if writer.is_some() {
+                            frame.color.clone()
+                        } else {
+                            std::mem::take(&mut frame.color)
+                        },
+                        stats,
+                    },
                 };
-                if !send_to_window(sink, image.meta.size, color, stats) {
+                if sink.send_event(event).is_err() {
                     // The window was closed: the session ends.
                     break;
                 }
@@ -532,11 +565,11 @@ pub async fn run_headless(
                 (config.viewer.as_ref().map(|v| &v.source), &image)
             {
                 let at_present = track.pose_at(&start_pose, present_at.as_secs_f64());
-                view_error_deg.push(angle_deg(&image.meta.camera.pose, &at_present));
+                view_error_deg.push(angle_deg(&image.meta().camera.pose, &at_present));
             }
             // Handed over last, when nothing here reads it any more: moved,
             // not copied.
-            if let (Some(writer), Some(mut shown)) = (writer.as_mut(), image) {
+            if let (Some(writer), Some(Shown::Host(mut shown))) = (writer.as_mut(), image) {
                 // A presented sequence is numbered by display id, uncut.
                 shown.meta.index = slot.display_id;
                 shown.meta.cut = false;
@@ -576,6 +609,7 @@ pub async fn run_headless(
         records: accounting.records().to_vec(),
         passes: shown_passes.iter().map(|p| p.name().to_string()).collect(),
         plan,
+        on_device: on_device.map_or(0, |d| d.handed),
         viewer: ViewerReport {
             mode: ViewerConfig::mode(config.viewer.as_ref()).into(),
             turned_deg: inputs.last.map_or(0.0, |p| angle_deg(&start_pose, &p)),
@@ -710,17 +744,19 @@ impl Pusher {
 /// frame at α = 0 (re-projected, holes filled as for generated frames).
 fn produce(
     slot: &Slot,
-    generator: &mut FrameGenerator,
+    (generator, on_device): (&mut FrameGenerator, Option<&mut DeviceFrames>),
     kept: &VecDeque<Frame>,
     (generation, passes): (&mut Vec<f64>, &mut Vec<framegen::pipeline::Pass>),
     (start, warp): (Instant, Option<Pose>),
-) -> anyhow::Result<(Option<Frame>, Option<Duration>)> {
+) -> anyhow::Result<(Option<Shown>, Option<Duration>)> {
     let generated = matches!(slot.kind, SlotKind::Extrapolated | SlotKind::Interpolated);
     if !generated && warp.is_none() {
         // Its displayed region (a no-op without a widened window).
         let frame = kept.iter().find(|f| f.meta.index == slot.source.id);
         let shown = match frame {
-            Some(f) => Some(tokio::task::block_in_place(|| generator.displayed(f))?),
+            Some(f) => Some(Shown::Host(tokio::task::block_in_place(|| {
+                generator.displayed(f)
+            })?)),
             None => None,
         };
         return Ok((shown, Some(slot.source.ready_at)));
@@ -734,11 +770,95 @@ fn produce(
         None => (slot.alpha, CameraSource::Extrapolated),
     };
     let t = Instant::now();
-    let g = tokio::task::block_in_place(|| generator.generate_with(alpha, camera))?;
+    let shown = tokio::task::block_in_place(|| match on_device {
+        Some(d) => d
+            .generate(generator, alpha, camera)
+            .map(|(meta, image)| Shown::Device(meta, image)),
+        None => Ok(Shown::Host(generator.generate_with(alpha, camera)?.frame)),
+    })?;
     generation.push(t.elapsed().as_secs_f64() * 1e3);
     passes.clear();
     passes.extend(generator.timings().iter().map(|p| p.pass));
-    Ok((Some(g.frame), Some(start.elapsed())))
+    Ok((Some(shown), Some(start.elapsed())))
+}
+
+/// A slot's image: a frame on the host, or a generated frame left on the
+/// device the window shares, display-encoded there.
+enum Shown {
+    Host(Frame),
+    Device(FrameMeta, Arc<crate::display::Image>),
+}
+
+impl Shown {
+    fn meta(&self) -> &FrameMeta {
+        match self {
+            Shown::Host(f) => &f.meta,
+            Shown::Device(meta, _) => meta,
+        }
+    }
+}
+
+/// Images a generator on the window's device writes its frames into
+/// ([`FrameGenerator::generate_to`]) and display-encodes there (issue 15
+/// §2): nothing crosses to the host. A few in turn, so the window can
+/// still be showing one while the next is made.
+struct DeviceFrames {
+    shared: crate::window::Shared,
+    ring: Vec<Arc<crate::display::Image>>,
+    next: usize,
+    /// Frames handed over.
+    handed: u64,
+}
+
+/// Images in [`DeviceFrames`]' ring.
+const RING: usize = 3;
+
+impl DeviceFrames {
+    fn new(shared: crate::window::Shared) -> Self {
+        Self {
+            shared,
+            ring: Vec::with_capacity(RING),
+            next: 0,
+            handed: 0,
+        }
+    }
+
+    /// Generates at `alpha` from `camera` into the next image and records
+    /// its display transform; the frame's header and the image.
+    fn generate(
+        &mut self,
+        generator: &mut FrameGenerator,
+        alpha: f64,
+        camera: CameraSource,
+    ) -> anyhow::Result<(FrameMeta, Arc<crate::display::Image>)> {
+        let size = generator
+            .generated_size()
+            .ok_or(framegen::FramegenError::NoFrame)?;
+        let (ctx, display) = (&self.shared.ctx, &self.shared.display);
+        ctx.require_texture("a generated frame", size.width, size.height)?;
+        let slot = self.next % RING;
+        self.next += 1;
+        let fits = |i: &crate::display::Image| (i.width, i.height) == (size.width, size.height);
+        let image = match self.ring.get(slot) {
+            Some(i) if fits(i) => i.clone(),
+            _ => {
+                let i = Arc::new(display.image(&ctx.device, size.width, size.height));
+                if slot < self.ring.len() {
+                    self.ring[slot] = i.clone();
+                } else {
+                    self.ring.push(i.clone());
+                }
+                i
+            }
+        };
+        let meta = generator.generate_to(alpha, camera, image.source())?;
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        display.encode(&mut encoder, &image);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.check("display-encoding a generated frame")?;
+        self.handed += 1;
+        Ok((meta, image))
+    }
 }
 
 /// The overlay text (in the spirit of Moonlight's statistics overlay).
@@ -781,21 +901,4 @@ fn overlay(
         drops.scheduler,
         color_errors,
     )
-}
-
-/// Hands a frame's colour (linear: the window display-encodes it on its
-/// GPU) to the window; false once the window is gone.
-fn send_to_window(
-    sink: &crate::window::Sink,
-    size: protocol::FrameSize,
-    color: Vec<[half::f16; 4]>,
-    stats: String,
-) -> bool {
-    sink.send_event(crate::window::Event::Frame {
-        width: size.width,
-        height: size.height,
-        color,
-        stats,
-    })
-    .is_ok()
 }

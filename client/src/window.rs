@@ -20,8 +20,9 @@ use winit::event_loop::{ActiveEventLoop, EventLoop, EventLoopProxy};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
-use crate::display::DisplayPass;
+use crate::display::{DisplayPass, Image};
 use crate::viewer::{LiveViewer, MoveKey};
+use framegen::GpuContext;
 
 /// What the presenter sends the window.
 #[derive(Debug)]
@@ -38,8 +39,38 @@ pub enum Event {
         /// Overlay text.
         stats: String,
     },
+    /// A presented frame already display-encoded on the window's own
+    /// device (by a generator sharing it, [`Shared`]), and the overlay
+    /// text.
+    Encoded {
+        /// The frame's textures; the window shows `encoded`.
+        image: Arc<Image>,
+        /// Overlay text.
+        stats: String,
+    },
     /// The session ended.
     Done,
+}
+
+/// What the window shares with the presenter once it is up: its device
+/// (opened as the generator would open one, [`GpuContext::descriptor`],
+/// on an adapter that presents to the window) and its display transform,
+/// so that a generator on that device hands frames over without leaving
+/// it (issue 15 §2).
+#[derive(Clone, Debug)]
+pub struct Shared {
+    /// The window's device, as a generator's context.
+    pub ctx: Arc<GpuContext>,
+    /// The display transform into the window's image format.
+    pub display: Arc<DisplayPass>,
+}
+
+/// A frame waiting for the next redraw.
+enum Pending {
+    /// Linear colour from the host: width, height, pixels.
+    Host(u32, u32, Vec<[half::f16; 4]>),
+    /// Already encoded on the device.
+    Device(Arc<Image>),
 }
 
 /// Where the presenter sends frames.
@@ -52,11 +83,14 @@ pub fn event_loop() -> anyhow::Result<EventLoop<Event>> {
 
 /// Runs the window until the session ends or the user closes it. With
 /// `screenshot`, the last drawn frame (overlay included) is saved there.
-/// With `viewer`, its mouse and keys drive that viewer.
+/// With `viewer`, its mouse and keys drive that viewer. With `share`, the
+/// window's device and display transform are sent there once the window
+/// is up (dropped unsent if it fails to open).
 pub fn run(
     event_loop: EventLoop<Event>,
     screenshot: Option<PathBuf>,
     viewer: Option<LiveViewer>,
+    share: Option<std::sync::mpsc::SyncSender<Shared>>,
 ) -> anyhow::Result<()> {
     let mut app = App {
         window: None,
@@ -68,6 +102,7 @@ pub fn run(
         error: None,
         viewer,
         dragging: None,
+        share,
     };
     event_loop.run_app(&mut app)?;
     match app.error {
@@ -79,9 +114,8 @@ pub fn run(
 struct App {
     window: Option<Arc<Window>>,
     gfx: Option<Gfx>,
-    /// The newest frame not yet on the window's device (width, height,
-    /// colour).
-    pending: Option<(u32, u32, Vec<[half::f16; 4]>)>,
+    /// The newest frame not yet shown.
+    pending: Option<Pending>,
     /// The newest frame's overlay text.
     stats: String,
     overlay: bool,
@@ -91,6 +125,8 @@ struct App {
     viewer: Option<LiveViewer>,
     /// While the left button is held: the cursor's last position.
     dragging: Option<Option<(f64, f64)>>,
+    /// Where the window's device goes once it is open.
+    share: Option<std::sync::mpsc::SyncSender<Shared>>,
 }
 
 /// The viewer's movement key for a key's text, if it is one.
@@ -121,8 +157,10 @@ impl App {
         let Some(gfx) = self.gfx.as_mut() else {
             return Ok(());
         };
-        if let Some((w, h, color)) = self.pending.take() {
-            gfx.show(w, h, &color)?;
+        match self.pending.take() {
+            Some(Pending::Host(w, h, color)) => gfx.show(w, h, &color)?,
+            Some(Pending::Device(image)) => gfx.show_encoded(image),
+            None => {}
         }
         gfx.draw(self.overlay.then_some(self.stats.as_str()))
     }
@@ -150,6 +188,14 @@ impl ApplicationHandler<Event> for App {
             });
         match result {
             Ok((w, gfx)) => {
+                if let Some(share) = self.share.take() {
+                    // The presenter may have stopped waiting: then it
+                    // generates elsewhere.
+                    let _ = share.try_send(Shared {
+                        ctx: gfx.gpu.clone(),
+                        display: gfx.display.clone(),
+                    });
+                }
                 self.window = Some(w);
                 self.gfx = Some(gfx);
             }
@@ -165,7 +211,14 @@ impl ApplicationHandler<Event> for App {
                 color,
                 stats,
             } => {
-                self.pending = Some((width, height, color));
+                self.pending = Some(Pending::Host(width, height, color));
+                self.stats = stats;
+                if let Some(w) = &self.window {
+                    w.request_redraw();
+                }
+            }
+            Event::Encoded { image, stats } => {
+                self.pending = Some(Pending::Device(image));
                 self.stats = stats;
                 if let Some(w) = &self.window {
                     w.request_redraw();
@@ -273,17 +326,21 @@ impl ApplicationHandler<Event> for App {
 /// The wgpu side of the window.
 struct Gfx {
     surface: wgpu::Surface<'static>,
-    /// The device (errors typed, never wgpu's panic).
-    gpu: gpu_device::Device,
+    /// The device (errors typed, never wgpu's panic), opened as a
+    /// generator's so that one can share it.
+    gpu: Arc<GpuContext>,
     config: wgpu::SurfaceConfiguration,
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
     /// The display transform into the encoded image's format.
-    display: DisplayPass,
+    display: Arc<DisplayPass>,
     /// The shown frame on the device, and its encoded image bound for the
     /// blit.
-    image: Option<(crate::display::Image, wgpu::BindGroup)>,
+    image: Option<(Arc<Image>, wgpu::BindGroup)>,
+    /// Where frames from the host are uploaded and encoded (the shown
+    /// frame may instead be one a generator on this device encoded).
+    own: Option<Arc<Image>>,
     target: (wgpu::Texture, wgpu::BindGroup),
     text: Text,
 }
@@ -331,17 +388,14 @@ impl Gfx {
         );
         let surface = instance.create_surface(window)?;
         let adapter = gpu_device::adapter_for_surface(&instance, &surface)?;
-        let gpu = gpu_device::Device::open(
+        // Opened as the generator opens its own, so that it can share it.
+        let gpu = GpuContext::from_device(gpu_device::Device::open(
             &adapter,
             &wgpu::DeviceDescriptor {
                 label: Some("window"),
-                required_features: wgpu::Features::empty(),
-                required_limits: adapter.limits(),
-                experimental_features: wgpu::ExperimentalFeatures::disabled(),
-                memory_hints: wgpu::MemoryHints::Performance,
-                trace: wgpu::Trace::Off,
+                ..GpuContext::descriptor(&adapter)
             },
-        )?;
+        )?);
         let scope = gpu.scope("building the window's pipeline");
         let (device, queue) = (&gpu.device, &gpu.queue);
         let mut config = surface
@@ -375,14 +429,14 @@ impl Gfx {
         let target = Self::make_target(device, &layout, &sampler, &config);
         // Encoded into sRGB where the surface is: sampled through it the
         // image decodes to linear, which the surface encodes again.
-        let display = DisplayPass::new(
+        let display = Arc::new(DisplayPass::new(
             device,
             if config.format.is_srgb() {
                 wgpu::TextureFormat::Rgba8UnormSrgb
             } else {
                 wgpu::TextureFormat::Rgba8Unorm
             },
-        );
+        ));
         let text = Text::new(device, queue, config.format);
         scope.finish()?;
         Ok(Self {
@@ -394,6 +448,7 @@ impl Gfx {
             sampler,
             display,
             image: None,
+            own: None,
             target,
             text,
         })
@@ -436,28 +491,28 @@ impl Gfx {
             return Ok(());
         }
         self.gpu.require_texture("a presented frame", w, h)?;
-        if self
-            .image
-            .as_ref()
-            .is_none_or(|(i, _)| (i.width, i.height) != (w, h))
-        {
-            let image = self.display.image(&self.gpu.device, w, h);
-            let group = bind(
-                &self.gpu.device,
-                &self.layout,
-                &self.sampler,
-                &image.encoded,
-            );
-            self.image = Some((image, group));
-        }
-        let Some((image, _)) = &self.image else {
-            return Ok(());
+        let own = match &self.own {
+            Some(i) if (i.width, i.height) == (w, h) => i.clone(),
+            _ => Arc::new(self.display.image(&self.gpu.device, w, h)),
         };
-        self.display.upload(&self.gpu.queue, image, color)?;
+        self.display.upload(&self.gpu.queue, &own, color)?;
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
-        self.display.encode(&mut encoder, image);
+        self.display.encode(&mut encoder, &own);
         self.gpu.queue.submit([encoder.finish()]);
+        self.own = Some(own.clone());
+        self.show_encoded(own);
         Ok(())
+    }
+
+    /// Shows a frame already display-encoded on this device.
+    fn show_encoded(&mut self, image: Arc<Image>) {
+        let group = bind(
+            &self.gpu.device,
+            &self.layout,
+            &self.sampler,
+            &image.encoded,
+        );
+        self.image = Some((image, group));
     }
 
     /// Draws the shown frame and the overlay (`stats`) onto the surface.

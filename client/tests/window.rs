@@ -8,14 +8,51 @@ use std::process::Command;
 
 #[test]
 fn the_window_shows_frames_and_the_overlay() {
-    shows_frames_and_the_overlay(None);
+    shows_frames_and_the_overlay(None, &["--backend", "cpu"]);
+}
+
+/// Issue 15 §2: with the generator on wgpu, the window shares its device,
+/// and generated frames are shown from it without a read-back (the
+/// report counts them; lavapipe here, interpolation its quickest method).
+#[test]
+fn the_window_shows_frames_generated_on_its_device() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("report.json");
+    let report_arg = report.to_str().unwrap();
+    shows_frames_and_the_overlay(
+        None,
+        &[
+            "--backend",
+            "wgpu",
+            "--method",
+            "interp",
+            "--json",
+            report_arg,
+        ],
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&report).expect("report written")).unwrap();
+    let on_device = json["on_device"].as_u64().unwrap();
+    let generated = json["records"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["kind"] == "interpolated")
+        .count() as u64;
+    assert!(
+        on_device > 0,
+        "no frame stayed on the device: {}",
+        json["backend"]
+    );
+    // Every generated frame shown went that way (none was read back).
+    assert!(on_device >= generated, "{on_device} of {generated}");
 }
 
 /// The same on wgpu's OpenGL backend (EGL on X11), what a machine without
 /// Mesa's Vulkan driver presents with.
 #[test]
 fn the_window_shows_frames_on_opengl() {
-    shows_frames_and_the_overlay(Some("gl"));
+    shows_frames_and_the_overlay(Some("gl"), &["--backend", "cpu"]);
 }
 
 /// One virtual X server at a time: `xvfb-run -a` races for a free display
@@ -94,7 +131,9 @@ fn mouse_and_keys_drive_the_viewer_in_a_window() {
     assert!(viewer["inputs"]["sent"].as_u64().unwrap() > 10, "{viewer}");
 }
 
-fn shows_frames_and_the_overlay(backend: Option<&str>) {
+/// Runs the demo in a window for two seconds with `generator`'s options
+/// (under `WGPU_BACKEND=backend` if given) and checks its screenshot.
+fn shows_frames_and_the_overlay(backend: Option<&str>, generator: &[&str]) {
     let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
     needs("xvfb-run", "xvfb");
     let dir = tempfile::tempdir().unwrap();
@@ -113,9 +152,8 @@ fn shows_frames_and_the_overlay(backend: Option<&str>) {
             "2",
             "--size",
             "160x90",
-            "--backend",
-            "cpu",
         ])
+        .args(generator)
         .arg("--screenshot")
         .arg(&shot);
     let stdout = succeeded(&mut cmd);

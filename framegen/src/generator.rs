@@ -392,6 +392,19 @@ impl FrameGenerator {
         Ok(meta)
     }
 
+    /// The size of the frames generated from the last rendered frame: the
+    /// displayed size, or the rendered grid for a method that works on it
+    /// (interpolation); none before the first frame.
+    pub fn generated_size(&self) -> Option<FrameSize> {
+        let cur = self.current.as_ref()?;
+        let (width, height) = if self.settings.method.descriptor().rendered_grid {
+            (cur.meta.size.width, cur.meta.size.height)
+        } else {
+            cur.display
+        };
+        Some(FrameSize { width, height })
+    }
+
     /// The job of a generated frame at `alpha` with the camera from
     /// `source`, and the frame's header.
     fn job(&self, alpha: f64, source: CameraSource) -> Result<(Job, FrameMeta), FramegenError> {
@@ -429,15 +442,8 @@ impl FrameGenerator {
                 Window::FULL
             },
         };
-        let (dw, dh) = if method.rendered_grid {
-            (cur.meta.size.width, cur.meta.size.height)
-        } else {
-            cur.display
-        };
-        let size = FrameSize {
-            width: dw,
-            height: dh,
-        };
+        let size = self.generated_size().ok_or(FramegenError::NoFrame)?;
+        let (dw, dh) = (size.width, size.height);
         let origin = cur.meta.camera.pose.position;
         let crop = cur.crop;
         let job = Job {

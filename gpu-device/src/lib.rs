@@ -556,9 +556,20 @@ impl Device {
     /// Blocks until every submitted command buffer has finished, then
     /// reports any error recorded meanwhile.
     pub fn wait(&self) -> Result<(), GpuError> {
+        self.wait_until(None)
+    }
+
+    /// Blocks until submission `index` has finished (not what others
+    /// sharing the device submitted after it: a window presenting from the
+    /// device that generates), then reports any error recorded meanwhile.
+    pub fn wait_for(&self, index: wgpu::SubmissionIndex) -> Result<(), GpuError> {
+        self.wait_until(Some(index))
+    }
+
+    fn wait_until(&self, index: Option<wgpu::SubmissionIndex>) -> Result<(), GpuError> {
         self.device
             .poll(wgpu::PollType::Wait {
-                submission_index: None,
+                submission_index: index,
                 timeout: None,
             })
             .map_err(|e| GpuError::Lost {

@@ -752,6 +752,7 @@ fn a_frame_left_on_the_device_is_the_frame_read_back() {
                 .generate_to(0.5, framegen::CameraSource::Extrapolated, &texture)
                 .unwrap();
             assert_eq!(meta, read.frame.meta, "{method} {size:?}");
+            assert_eq!(g.generated_size(), Some(meta.size), "{method}");
             let on_device = texture_bytes(&ctx, &texture);
             let expected: &[u8] = bytemuck::cast_slice(&read.frame.color);
             assert_eq!(on_device.len(), expected.len());

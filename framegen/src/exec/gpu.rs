@@ -205,9 +205,9 @@ impl Recorder {
     /// Submits what was recorded and waits for it.
     fn flush(&mut self, ctx: &GpuContext) -> Result<(), FramegenError> {
         if let Some(encoder) = self.encoder.take() {
-            ctx.queue.submit([encoder.finish()]);
+            let index = ctx.queue.submit([encoder.finish()]);
             self.pool.restart();
-            ctx.wait()?;
+            ctx.wait_for(index)?;
         }
         Ok(())
     }
