@@ -1,15 +1,19 @@
 //! The window presenter: a winit window with a wgpu surface showing the
 //! presented frames (linear HDR colour, display-encoded on the window's
-//! GPU: exposure 1, Reinhard, sRGB; [`crate::display`]) and a stats overlay in the spirit of Moonlight's,
-//! toggled with `O` (text by `glyphon`). `Esc` or closing the window ends
-//! the session. In an interactive session the mouse and keys drive the
-//! viewer ([`crate::viewer::LiveViewer`]: drag with the left button to
-//! look, W/A/S/D to move, Space and C up and down, Shift to run).
+//! GPU: exposure 1, Reinhard, sRGB; [`crate::display`]) and a stats
+//! overlay in the spirit of Moonlight's, toggled with `O` (text by
+//! `glyphon`). `Esc` or closing the window ends the session. In an
+//! interactive session the mouse and keys drive the viewer
+//! ([`crate::viewer::LiveViewer`]: drag with the left button to look,
+//! W/A/S/D to move, Space and C up and down, Shift to run).
 //!
 //! Each frame is display-encoded once, as it arrives, then drawn into an
-//! offscreen target of the surface's format (image, then overlay), which is then drawn onto the surface; the same
-//! target serves `--screenshot`. The presenter loop runs on its own thread
-//! and hands frames over through the event loop proxy.
+//! offscreen target of the surface's format (image, then overlay), which
+//! is then drawn onto the surface; the same target serves `--screenshot`.
+//! The presenter loop runs on its own thread and hands frames over through
+//! the event loop proxy: a frame's colour from the host, or, where a wgpu
+//! generator shares the window's device ([`Shared`]), a frame it already
+//! generated and display-encoded there.
 
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -14,6 +14,11 @@
 //! `gffe-nearest/total` is gffe with the seed's nearest-pixel colour
 //! instead of the default resampling filter (what the filter costs).
 //!
+//! `gffe/total-on-device` and `interp/total-on-device` (wgpu) are the
+//! totals with the generated frame left on the device, as a window that
+//! shares it shows it (`FrameGenerator::generate_to`): what the read-back
+//! costs, against `total`.
+//!
 //! `repeat/upload`, `repeat/crop` and `repeat/readback` split the cheapest
 //! method on wgpu into its transfers and its one kernel: what a frame costs
 //! to move on and off the device against what a trivial kernel costs there.
@@ -203,6 +208,29 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
             group.bench_function(format!("{method}/total"), |b| {
                 b.iter(|| run(&mut g, &mut feed))
             });
+        }
+        // The same totals with the generated frame left on the device, as
+        // a window sharing it shows it (`generate_to`): no read-back.
+        if gpu {
+            for method in [Method::Gffe, Method::Interp] {
+                let mut g = make(method, false);
+                run(&mut g, &mut feed);
+                let size = g.generated_size().expect("a frame was pushed");
+                let target = gpu_device::texture_2d(
+                    &ctx.device,
+                    "generated frame",
+                    (size.width, size.height),
+                    wgpu::TextureFormat::Rgba16Float,
+                    wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::TEXTURE_BINDING,
+                );
+                group.bench_function(format!("{method}/total-on-device"), |b| {
+                    b.iter(|| {
+                        g.push(feed.next()).expect("push");
+                        g.generate_to(0.5, framegen::CameraSource::Extrapolated, &target)
+                            .expect("generate");
+                    })
+                });
+            }
         }
         // What the warp's default colour filter costs: gffe with the seed's
         // nearest pixel, in the same run.
