@@ -852,10 +852,13 @@ impl DeviceFrames {
             }
         };
         let meta = generator.generate_to(alpha, camera, image.source())?;
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        display.encode(&mut encoder, &image);
-        ctx.queue.submit([encoder.finish()]);
-        ctx.check("display-encoding a generated frame")?;
+        // In a scope of its own: the window's errors on the shared device
+        // stay the window's to report.
+        ctx.checked("display-encoding a generated frame", || {
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            display.encode(&mut encoder, &image);
+            ctx.queue.submit([encoder.finish()]);
+        })?;
         self.handed += 1;
         Ok((meta, image))
     }
