@@ -22,7 +22,7 @@ use protocol::{Camera, Frame, FrameMeta, FrameSize, Limits, Pose, Window};
 
 use crate::FramegenError;
 use crate::gpu::GpuContext;
-use crate::input::{Sanitized, prepare};
+use crate::input::{Prepared, Sanitized, prepare, prepare_into};
 use crate::output::{DisplayMap, Output, PixelSource};
 use crate::passes::common::camera::PassCamera;
 use crate::passes::common::crop::Crop;
@@ -122,7 +122,14 @@ pub struct FrameGenerator {
     current: Option<Current>,
     sanitized: Sanitized,
     limits: Limits,
+    /// The last few prepared frames, whose buffers the next push reuses
+    /// once no executor holds them.
+    recent: std::collections::VecDeque<Arc<Prepared>>,
 }
+
+/// Prepared frames kept in [`FrameGenerator`]'s `recent`: one more than an
+/// executor holds (the current frame and the one before).
+const RECENT: usize = 3;
 
 impl std::fmt::Debug for FrameGenerator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -160,6 +167,7 @@ impl FrameGenerator {
             current: None,
             sanitized: Sanitized::default(),
             limits: Limits::default(),
+            recent: Default::default(),
         })
     }
 
@@ -262,7 +270,17 @@ impl FrameGenerator {
             Some(c) if meta.index <= c.meta.index => Some("index did not increase"),
             Some(_) => None,
         };
-        let prepared = Arc::new(prepare(frame));
+        // The oldest prepared frame nothing else holds any more (the
+        // executors keep the last one or two) lends its buffers.
+        let free = self.recent.iter().position(|p| Arc::strong_count(p) == 1);
+        let reuse = free
+            .and_then(|i| self.recent.remove(i))
+            .and_then(|p| Arc::try_unwrap(p).ok());
+        let prepared = Arc::new(prepare_into(frame, reuse));
+        self.recent.push_back(prepared.clone());
+        if self.recent.len() > RECENT {
+            self.recent.pop_front();
+        }
         self.sanitized.color += prepared.sanitized.color;
         self.sanitized.depth += prepared.sanitized.depth;
         self.sanitized.motion += prepared.sanitized.motion;

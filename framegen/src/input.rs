@@ -75,7 +75,24 @@ fn sanitize_half(v: f16) -> (f16, bool) {
 
 /// Converts and sanitises a frame's buffers.
 pub fn prepare(frame: &Frame) -> Prepared {
+    prepare_into(frame, None)
+}
+
+/// [`prepare`] into the buffers of `reuse`, a prepared frame no longer
+/// needed, where their sizes fit: every element is written, so they are not
+/// filled first (a fresh frame-sized buffer is written twice, once to fill
+/// it and once with its values).
+pub fn prepare_into(frame: &Frame, reuse: Option<Prepared>) -> Prepared {
     use rayon::prelude::*;
+    // A buffer of `reuse` where it holds `n` elements, else a new one.
+    fn buffer<T: Copy + Send + Sync>(kept: Option<Vec<T>>, zero: T, n: usize) -> Vec<T> {
+        kept.filter(|b| b.len() == n)
+            .unwrap_or_else(|| crate::par::filled(zero, n))
+    }
+    let (kept_color, kept_depth, kept_motion) = match reuse {
+        Some(p) => (Some(p.color), Some(p.depth), Some(p.motion)),
+        None => (None, None, None),
+    };
     use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
     // On all cores, in one pass per buffer: each value is replaced on its
     // own and the (rare) replacements are counted as integers, so the result
@@ -85,7 +102,7 @@ pub fn prepare(frame: &Frame) -> Prepared {
     // or negative value), every lane alike (alpha too, then set to 1 and
     // its count taken back out): uniform lanes vectorise, a 3-of-4 pattern
     // does not. Counts per block fit a `u32`.
-    let mut color = crate::par::filled([f16::ZERO; 4], frame.color.len());
+    let mut color = buffer(kept_color, [f16::ZERO; 4], frame.color.len());
     color
         .par_chunks_mut(CONVERT_BLOCK)
         .zip(frame.color.par_chunks(CONVERT_BLOCK))
@@ -105,22 +122,29 @@ pub fn prepare(frame: &Frame) -> Prepared {
                 bad_color.fetch_add(u64::from(bad), Relaxed);
             }
         });
-    let depth: Vec<f32> = frame
-        .depth
-        .par_iter()
-        .map(|&d| {
-            if d > 0.0 {
-                d
-            } else {
-                bad_depth.fetch_add(1, Relaxed);
-                0.0
-            }
-        })
-        .collect();
+    let depth_of = |d: f32| {
+        if d > 0.0 {
+            d
+        } else {
+            bad_depth.fetch_add(1, Relaxed);
+            0.0
+        }
+    };
+    // Collected where there is no buffer to reuse (written once either way).
+    let depth = match kept_depth.filter(|b| b.len() == frame.depth.len()) {
+        Some(mut kept) => {
+            kept.par_iter_mut()
+                .zip(&frame.depth)
+                .with_min_len(CONVERT_BLOCK)
+                .for_each(|(out, &d)| *out = depth_of(d));
+            kept
+        }
+        None => frame.depth.par_iter().map(|&d| depth_of(d)).collect(),
+    };
     let limit = 4.0 * frame.meta.size.width.max(frame.meta.size.height) as f32;
     // Component by component in blocks, with a count per block: a loop the
     // compiler vectorises (a closure per component was not inlined).
-    let mut motion = crate::par::filled([0.0f32; 2], frame.motion.len());
+    let mut motion = buffer(kept_motion, [0.0f32; 2], frame.motion.len());
     motion
         .par_chunks_mut(CONVERT_BLOCK)
         .zip(frame.motion.par_chunks(CONVERT_BLOCK))
@@ -176,5 +200,39 @@ mod tests {
             assert_eq!(h.to_f32(), expected, "{bits:#06x}");
             assert!(h.is_sign_positive(), "{bits:#06x}");
         }
+    }
+
+    /// A frame with values to replace in every buffer.
+    fn dirty(index: u64, size: protocol::FrameSize) -> Frame {
+        let mut f = crate::testutil::frame(index, size);
+        for (i, c) in f.color.iter_mut().enumerate() {
+            let v = f16::from_f32(i as f32 * 0.37 - 20.0);
+            *c = [v, f16::NAN, f16::from_f32(i as f32), f16::INFINITY];
+        }
+        for (i, d) in f.depth.iter_mut().enumerate() {
+            *d = [f32::NAN, -1.0, 0.0, 2.5, f32::INFINITY][i % 5];
+        }
+        for (i, m) in f.motion.iter_mut().enumerate() {
+            *m = [[f32::NAN, 1e9][i % 2], i as f32 - 3.0];
+        }
+        f
+    }
+
+    /// Preparing into the buffers of an earlier prepared frame gives what a
+    /// fresh preparation gives (buffers, counts), whatever those buffers
+    /// held, and buffers of another size are not reused.
+    #[test]
+    fn prepared_into_reused_buffers_is_prepared_afresh() {
+        let size = protocol::FrameSize::new(37, 5);
+        let frame = dirty(1, size);
+        let fresh = prepare(&frame);
+        assert!(fresh.sanitized.total() > 0 && fresh.valid > 0);
+        let earlier = prepare(&crate::testutil::frame(0, size));
+        let color_at = earlier.color.as_ptr();
+        let reused = prepare_into(&frame, Some(earlier));
+        assert_eq!(reused, fresh);
+        assert_eq!(reused.color.as_ptr(), color_at, "the buffer was reused");
+        let small = prepare(&crate::testutil::frame(0, protocol::FrameSize::new(3, 2)));
+        assert_eq!(prepare_into(&frame, Some(small)), fresh);
     }
 }
