@@ -82,6 +82,6 @@ pub enum FramegenError {
     #[error("the {0} generator has no device to leave a frame on")]
     NotOnDevice(String),
     /// The texture a generated frame was asked into does not fit it.
-    #[error("a {width}x{height} {format:?} texture cannot take a {0}x{1} generated frame (Rgba16Float of its size)", width = .2.0, height = .2.1, format = .2.2)]
+    #[error("a {width}x{height} {format:?} texture cannot take a {0}x{1} generated frame (an Rgba16Float copy destination of its size)", width = .2.0, height = .2.1, format = .2.2)]
     Target(u32, u32, (u32, u32, wgpu::TextureFormat)),
 }
