@@ -243,42 +243,6 @@ pub(crate) fn begin<'a>(
     })
 }
 
-/// Reads a texture of 4 bytes a pixel back to the host: its rows, top
-/// first, without the copy's padding (the window's screenshot, tests).
-pub fn read_back(gpu: &gpu_device::Device, texture: &wgpu::Texture) -> anyhow::Result<Vec<u8>> {
-    let (w, h) = (texture.width(), texture.height());
-    let row = (4 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-    let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("read back"),
-        size: u64::from(row) * u64::from(h),
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut encoder = gpu.device.create_command_encoder(&Default::default());
-    encoder.copy_texture_to_buffer(
-        texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(row),
-                rows_per_image: Some(h),
-            },
-        },
-        texture.size(),
-    );
-    gpu.queue.submit([encoder.finish()]);
-    let slice = buffer.slice(..);
-    slice.map_async(wgpu::MapMode::Read, |_| {});
-    gpu.wait()?;
-    let data = slice.get_mapped_range()?;
-    Ok(data
-        .chunks_exact(row as usize)
-        .flat_map(|r| &r[..4 * w as usize])
-        .copied()
-        .collect())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -318,7 +282,7 @@ mod tests {
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
             pass.encode(&mut encoder, &image);
             gpu.queue.submit([encoder.finish()]);
-            let got = read_back(&gpu, &image.encoded).unwrap();
+            let got = gpu.read_texture(&image.encoded).unwrap();
             gpu.check("the display transform").unwrap();
             let mut worst = 0;
             for (i, (px, want)) in got

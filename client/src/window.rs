@@ -579,7 +579,7 @@ impl Gfx {
     /// Saves the offscreen target (what the window shows) as a PNG.
     fn save(&self, path: &std::path::Path) -> anyhow::Result<()> {
         let (w, h) = (self.config.width, self.config.height);
-        let data = crate::display::read_back(&self.gpu, &self.target.0)?;
+        let data = self.gpu.read_texture(&self.target.0)?;
         let bgra = matches!(
             self.config.format,
             wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb

@@ -553,6 +553,56 @@ impl Device {
         }
     }
 
+    /// Reads a texture (one mip level, one layer, a colour format) back to
+    /// the host: its rows, top first, without the copy's row padding. For
+    /// screenshots and tests, not a hot path (it waits for the device).
+    pub fn read_texture(&self, texture: &wgpu::Texture) -> Result<Vec<u8>, GpuError> {
+        let format = texture.format();
+        let Some(texel) = format.block_copy_size(None) else {
+            return Err(GpuError::Unsupported {
+                adapter: self.describe(),
+                backend: self.adapter_info.backend,
+                what: "a read-back".into(),
+                format,
+                missing: "one copyable aspect".into(),
+            });
+        };
+        let (w, h) = (texture.width(), texture.height());
+        let row = (texel * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("texture read-back"),
+            size: u64::from(row) * u64::from(h),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(h),
+                },
+            },
+            texture.size(),
+        );
+        self.queue.submit([encoder.finish()]);
+        let slice = buffer.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        self.wait()?;
+        let data = slice.get_mapped_range().map_err(|e| GpuError::Lost {
+            adapter: self.describe(),
+            reason: format!("mapping a read-back: {e:?}"),
+        })?;
+        Ok(data
+            .chunks_exact(row as usize)
+            .flat_map(|r| &r[..(texel * w) as usize])
+            .copied()
+            .collect())
+    }
+
     /// Blocks until every submitted command buffer has finished, then
     /// reports any error recorded meanwhile.
     pub fn wait(&self) -> Result<(), GpuError> {

@@ -693,35 +693,6 @@ fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
     }
 }
 
-/// The bytes of a texture of 8 bytes a pixel (rows unpadded).
-fn texture_bytes(ctx: &GpuContext, texture: &wgpu::Texture) -> Vec<u8> {
-    let (w, h) = (texture.width(), texture.height());
-    let row = (8 * w).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-    let buffer = ctx.staging("texture read-back", u64::from(row) * u64::from(h));
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
-    encoder.copy_texture_to_buffer(
-        texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(row),
-                rows_per_image: Some(h),
-            },
-        },
-        texture.size(),
-    );
-    ctx.queue.submit([encoder.finish()]);
-    ctx.map_read(&buffer, u64::from(row) * u64::from(h), |bytes| {
-        bytes
-            .chunks_exact(row as usize)
-            .flat_map(|r| &r[..8 * w as usize])
-            .copied()
-            .collect()
-    })
-    .unwrap()
-}
-
 /// Issue 15 §2: a generated frame left on the device (`generate_to`, for
 /// a presenter on that device) holds bit for bit the colour the same
 /// generation reads back, for every method, at a width whose rows copy
@@ -753,7 +724,7 @@ fn a_frame_left_on_the_device_is_the_frame_read_back() {
                 .unwrap();
             assert_eq!(meta, read.frame.meta, "{method} {size:?}");
             assert_eq!(g.generated_size(), Some(meta.size), "{method}");
-            let on_device = texture_bytes(&ctx, &texture);
+            let on_device = ctx.read_texture(&texture).unwrap();
             let expected: &[u8] = bytemuck::cast_slice(&read.frame.color);
             assert_eq!(on_device.len(), expected.len());
             let differ = on_device
