@@ -23,7 +23,11 @@
 //!   shown n vsyncs after the first one after it is ready (t+1 ready just
 //!   after t was shown: the minimum) or one render interval (t+1 ready
 //!   before t was shown), so with the presenter's one-vsync queue its
-//!   latency is at least one render interval (ExtraNet §3.1).
+//!   latency is at least one render interval (ExtraNet §3.1). The phase
+//!   is kept where frames arrive in time for the slots between them:
+//!   ahead by more than a vsync, the scheduler catches up a vsync; a frame
+//!   shown as it arrives with none behind it makes it fall back a vsync
+//!   (`Scheduler::pace`).
 //! * **Repeat**: the newest ready frame, again and again (the baseline).
 //!
 //! Frames that become ready but are never shown are counted as drops by
@@ -266,21 +270,36 @@ impl Scheduler {
     }
 
     /// When the rendered frame `frame`, shown at `now`, counts as shown for
-    /// the α of the slots after it: `now`, or a vsync earlier to catch up.
+    /// the α of the slots after it: `now`, a vsync earlier to catch up, or
+    /// later to fall back (`alone`: no frame after it is ready yet).
     ///
     /// An interpolating display needs a frame when the first slot between
     /// it and the one before comes up, `render − display interval` before
     /// the frame itself is due; the frame's *margin* is how long before
-    /// that slot it was ready. Where the stream's phase leaves more than a
-    /// vsync of margin (frame t+1 ready before t was shown, as after
-    /// start-up, where the presenter waits for two frames), that vsync is
-    /// latency for nothing, for as long as the phase lasts. After
-    /// [`CATCH_UP_AFTER`] frames in a row with a margin of a vsync and a
-    /// quarter, the scheduler advances the animation by one vsync: the next
-    /// frame is due a vsync earlier (one slot between is skipped, an
-    /// animation step of one vsync once), and every later frame is shown a
-    /// vsync sooner with a quarter vsync of margin left for jitter.
-    fn catch_up(&mut self, frame: &FrameReady, now: Duration) -> Duration {
+    /// that slot it was ready.
+    ///
+    /// **Catching up.** Where the stream's phase leaves more than a vsync
+    /// of margin (frame t+1 ready before t was shown, as after start-up,
+    /// where the presenter waits for two frames), that vsync is latency for
+    /// nothing, for as long as the phase lasts. After [`CATCH_UP_AFTER`]
+    /// frames in a row with a margin of a vsync and a quarter, the
+    /// scheduler advances the animation by one vsync: the next frame is due
+    /// a vsync earlier (one slot between is skipped, an animation step of
+    /// one vsync once), and every later frame is shown a vsync sooner with
+    /// a quarter vsync of margin left for jitter.
+    ///
+    /// **Falling back.** A frame shown with a negative margin (ready less
+    /// than `render − display interval` before `now`, after a late frame or
+    /// when frames arrive just before the slot they are due at) leaves the
+    /// slots after it without the next frame, if the stream keeps its pace:
+    /// shown on time every time, each one would be followed by holds and no
+    /// slot would ever be interpolated again. Such a frame, when no frame
+    /// after it is ready yet, counts as shown the whole vsyncs later that
+    /// make its margin non-negative: it is shown now, the slots before that
+    /// time hold it (one hold, at 2×), and from then on the frames arrive
+    /// in time for the slots between them, each waiting less than a
+    /// render interval (the policy's contract).
+    fn pace(&mut self, frame: &FrameReady, now: Duration, alone: bool) -> Duration {
         let di = self.config.display_interval.as_secs_f64();
         let ri = self.config.render_interval.as_secs_f64();
         let waited = now.saturating_sub(frame.ready_at).as_secs_f64();
@@ -289,6 +308,10 @@ impl Scheduler {
             self.lagging += 1;
         } else {
             self.lagging = 0;
+        }
+        if alone && margin < 0.0 {
+            let vsyncs = (-margin / di).ceil() as u32;
+            return now + self.config.display_interval * vsyncs;
         }
         if self.lagging < CATCH_UP_AFTER {
             return now;
@@ -314,18 +337,22 @@ impl Scheduler {
             return Some((SlotKind::Rendered, first, None, 0.0));
         };
         let alpha = now.saturating_sub(at).as_secs_f64() / ri;
-        // Half a vsync of slack so rounding never skips a rendered frame.
-        let due = alpha + 0.5 * self.config.display_interval.as_secs_f64() / ri >= 1.0;
+        // Half a vsync of slack so rounding never skips a rendered frame,
+        // nor interpolates at α ≈ 0 (a frame that fell back, `pace`).
+        let slack = 0.5 * self.config.display_interval.as_secs_f64() / ri;
+        let due = alpha + slack >= 1.0;
         match self.pending.front().copied() {
             Some(_) if due => {
                 self.trim_backlog();
                 let next = self.pending.pop_front()?;
-                let at = self.catch_up(&next, now);
+                let at = self.pace(&next, now, self.pending.is_empty());
                 self.shown = Some((next, at));
                 Some((SlotKind::Rendered, next, None, 0.0))
             }
-            Some(next) => Some((SlotKind::Interpolated, current, Some(next), alpha)),
-            None => Some((SlotKind::Repeated, current, None, 0.0)),
+            Some(next) if alpha >= slack => {
+                Some((SlotKind::Interpolated, current, Some(next), alpha))
+            }
+            _ => Some((SlotKind::Repeated, current, None, 0.0)),
         }
     }
 }
@@ -502,6 +529,38 @@ mod tests {
         assert_eq!(drops, Drops::default());
         let kinds: Vec<_> = slots.iter().map(|s| s.kind).collect();
         assert!(kinds.windows(2).all(|w| w[0] != w[1]), "{kinds:?}");
+    }
+
+    /// Frames that start arriving later (from frame 30 on, 15 ms later:
+    /// just after the vsync each is due at) are shown as they come, but
+    /// the scheduler falls back a vsync once, so the slots between frames
+    /// are interpolated again. Shown on time instead, each frame would be
+    /// followed by a hold for the rest of the stream: the next frame comes
+    /// just after the slot between them.
+    #[test]
+    fn interpolation_falls_back_a_vsync_when_frames_come_later() {
+        let ready = |k: u64| (k as f64 * 1000.0 / 30.0) as u64 + 3 + if k >= 30 { 15 } else { 0 };
+        let (slots, drops) = run_with(Policy::Interpolate, 150, |k| Some(ready(k)));
+        assert_eq!(drops, Drops::default());
+        let shown = |id| slots.iter().position(|s| s.source.id == id).unwrap();
+        let after: Vec<_> = slots[shown(30)..].iter().map(|s| s.kind).collect();
+        assert!(after.len() >= 60, "{}", after.len());
+        // Frame 30 is shown, and held once.
+        assert_eq!(after[..2], [SlotKind::Rendered, SlotKind::Repeated]);
+        // From then on, rendered and interpolated slots alternate.
+        for (i, pair) in after[2..].chunks_exact(2).enumerate() {
+            assert_eq!(
+                pair,
+                [SlotKind::Interpolated, SlotKind::Rendered],
+                "slots {}.. after frame 30: {after:?}",
+                2 + 2 * i
+            );
+        }
+        // Every frame still waits less than a render interval.
+        let ri = Duration::from_secs_f64(1.0 / 30.0);
+        for (id, wait) in waits(&slots).into_iter().filter(|&(id, _)| id >= 30) {
+            assert!(wait < ri, "frame {id} waited {wait:?}");
+        }
     }
 
     #[test]
