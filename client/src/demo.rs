@@ -157,7 +157,14 @@ fn start_local_from(
         (Feed::interactive(spec, encoding)?, None)
     } else {
         let frames = Source::channel();
-        let source = Source::start(spec, encoding, frames.clone())?;
+        // The renderer (its driver's threads, the software rasteriser's
+        // here), the encoder and the producer loop run at a lower
+        // priority: they stand in for a remote machine, and on this one
+        // they must not take the presenter's and the generator's time.
+        let channel = frames.clone();
+        let source = crate::priority::start_in_background("the in-process server", || {
+            Source::start(spec, encoding, channel)
+        })??;
         (Feed::Live(frames), Some(source))
     };
     let server = Server::start("127.0.0.1:0".parse()?, &identity, policy, feed)?;

@@ -11,7 +11,8 @@
 //! disk falls that far behind the presenter waits for it rather than drop
 //! a frame (nothing presented is lost), and says so once.
 //!
-//! The writer also runs at a lower CPU priority ([`WRITER_NICE`]): `exr`
+//! The writer also runs at a lower CPU priority
+//! ([`crate::priority::BACKGROUND_NICE`]): `exr`
 //! compresses each file on a thread pool of its own as wide as the machine,
 //! which on a 16-core H200 machine took 78 of 481 vsyncs from a 640×360
 //! presenter writing a dump (none without), and the pool's threads inherit
@@ -25,11 +26,6 @@ use std::thread::JoinHandle;
 use anyhow::Context;
 use protocol::dump::DumpWriter;
 use protocol::{Frame, FrameSize};
-
-/// The writer thread's nice value (Linux; 0 is the default, 19 the
-/// lowest priority): a tenth of a default thread's CPU share under
-/// contention, all of it when the cores are idle.
-pub const WRITER_NICE: i32 = 10;
 
 /// Bytes of presented frames that may wait for the disk.
 pub const QUEUE_BYTES: u64 = 256 << 20;
@@ -189,30 +185,8 @@ impl Drop for FrameWriter {
     }
 }
 
-/// Lowers the calling thread's priority to [`WRITER_NICE`]; threads it
-/// starts inherit it. Best effort: a refusal only costs the presenter time.
-fn lower_priority() {
-    #[cfg(target_os = "linux")]
-    {
-        // SAFETY: `gettid` has no preconditions; `setpriority` with
-        // `PRIO_PROCESS` and a thread id changes only that thread's nice
-        // value (Linux's per-thread semantics) and reports failure by its
-        // return value.
-        let failed = unsafe {
-            let tid = libc::gettid();
-            libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, WRITER_NICE) != 0
-        };
-        if failed {
-            tracing::debug!(
-                "the frame writer keeps its priority: {}",
-                std::io::Error::last_os_error()
-            );
-        }
-    }
-}
-
 fn write_all(mut sinks: Vec<Box<dyn FrameSink>>, frames: Receiver<Frame>) -> anyhow::Result<()> {
-    lower_priority();
+    crate::priority::lower_this_thread("the frame writer");
     for frame in frames {
         for sink in &mut sinks {
             sink.write(&frame)?;

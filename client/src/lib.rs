@@ -7,6 +7,8 @@
 //!   which display-encodes on its GPU ([`display`]);
 //! * [`frame_writer`]: writes the presented frames (a dump, PNGs) off the
 //!   presenting thread;
+//! * [`priority`]: a lower CPU priority for the writer and the in-process
+//!   server, which must not take the presenter's time;
 //! * [`latch`]: when late input takes the viewer's pose, and what
 //!   becomes of an image that missed its vsync;
 //! * [`eval`]: `client eval`, quality against milliseconds for every
@@ -24,6 +26,7 @@ pub mod frame_writer;
 pub mod impair;
 pub mod latch;
 pub mod present;
+pub mod priority;
 pub mod receiver;
 pub mod reconnect;
 pub mod tls;

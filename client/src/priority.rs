@@ -1,0 +1,99 @@
+//! Lower CPU priority for work that must not take the presenter's time:
+//! the frame writer's disk and compression threads, and the in-process
+//! server, which stands in for a remote machine.
+//!
+//! On Linux a thread's nice value is its own, and the threads it starts
+//! inherit it; elsewhere nothing changes.
+
+/// The nice value of background work (Linux; 0 is the default, 19 the
+/// lowest priority): a tenth of a default thread's CPU share under
+/// contention, all of it when the cores are idle.
+pub const BACKGROUND_NICE: i32 = 10;
+
+/// Lowers the calling thread's priority to [`BACKGROUND_NICE`] (never
+/// raises it); threads it
+/// starts from now on inherit it. Best effort: a refusal only costs the
+/// presenter time, and is logged (`what` names the work).
+pub fn lower_this_thread(what: &str) {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: `gettid` has no preconditions; `setpriority` with
+        // `PRIO_PROCESS` and a thread id changes only that thread's nice
+        // value (Linux's per-thread semantics) and reports failure by its
+        // return value.
+        // A thread already below that priority stays where it is.
+        let failed = unsafe {
+            let tid = libc::gettid() as libc::id_t;
+            libc::getpriority(libc::PRIO_PROCESS, tid) < BACKGROUND_NICE
+                && libc::setpriority(libc::PRIO_PROCESS, tid, BACKGROUND_NICE) != 0
+        };
+        if failed {
+            tracing::debug!(
+                "{what} keeps its priority: {}",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = what;
+}
+
+/// Runs `start` on a thread of its own at [`BACKGROUND_NICE`] and returns
+/// its result (an error only where no thread can be started): whatever threads `start` starts (a renderer's driver
+/// threads, an encoder's, a producer loop) keep the lower priority for
+/// their lifetime.
+///
+/// The CPU generator's thread pool (rayon's global pool) is started first,
+/// here, at the caller's priority: started lazily by background work, its
+/// threads would inherit the lower priority and generate at it.
+pub fn start_in_background<T: Send>(
+    what: &str,
+    start: impl FnOnce() -> T + Send,
+) -> std::io::Result<T> {
+    rayon::current_num_threads();
+    std::thread::scope(|s| {
+        let thread = std::thread::Builder::new()
+            .name(format!("{what} (start)"))
+            .spawn_scoped(s, || {
+                lower_this_thread(what);
+                start()
+            })?;
+        match thread.join() {
+            Ok(v) => Ok(v),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    })
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use super::*;
+
+    fn nice_of_this_thread() -> i32 {
+        // SAFETY: as above; `getpriority` returns the nice value (which
+        // may be -1, so errno would tell an error apart; none occurs for
+        // the calling thread).
+        unsafe { libc::getpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t) }
+    }
+
+    /// Work started in the background, and the threads it starts, run at
+    /// the lower priority; the caller and rayon's pool keep theirs.
+    #[test]
+    fn background_work_and_its_threads_run_at_the_lower_priority() {
+        let caller = nice_of_this_thread();
+        let (own, child, pool) = start_in_background("test work", || {
+            let child = std::thread::spawn(nice_of_this_thread).join().unwrap();
+            // Work in the pool from the background (which would start it
+            // there, were it not started yet).
+            let pool = rayon::broadcast(|_| nice_of_this_thread());
+            (nice_of_this_thread(), child, pool)
+        })
+        .unwrap();
+        // Nice values only go up without privileges, and may already be
+        // above the background value.
+        let expected = caller.max(BACKGROUND_NICE);
+        assert_eq!((own, child), (expected, expected));
+        assert_eq!(nice_of_this_thread(), caller);
+        assert!(pool.iter().all(|&n| n == caller), "{pool:?} vs {caller}");
+    }
+}
