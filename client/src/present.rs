@@ -401,8 +401,15 @@ pub async fn run_headless(
         received += arrived.len() as u64;
         // Extrapolation generates from the newest frame at once;
         // interpolation pushes up to the pair when a slot between them
-        // comes up.
-        if !lazy {
+        // comes up. A rendered frame that arrived is shown first and
+        // ingested after it was handed over (`deferred`): showing it does
+        // not need the generator, and its ingest then shares the time to
+        // the next vsync with nothing, instead of delaying the frame. Late
+        // input re-projects a rendered frame from the generator's current
+        // one, so there the ingest comes first, as it does when more frames
+        // arrived at once than are kept.
+        let deferred = !lazy && !late && arrived.len() <= KEPT;
+        if !lazy && !deferred {
             pusher.push(&mut generator, arrived.iter().map(|a| &a.frame))?;
         }
         // The viewer's input, sent at once: taken as late as it can be,
@@ -452,6 +459,11 @@ pub async fn run_headless(
         // The vsync this slot's image was shown at, if it was shown.
         let mut shown_at = None;
         if let Some(slot) = scheduler.vsync(vsync) {
+            if deferred && slot.kind != SlotKind::Rendered {
+                // Not one of them is shown now: the slot generates from
+                // the newest.
+                pusher.push(&mut generator, &kept)?;
+            }
             if let (SlotKind::Interpolated, Some(next)) = (slot.kind, slot.next) {
                 let due = kept.iter().filter(|f| f.meta.index <= next.id);
                 pusher.push(&mut generator, due)?;
@@ -575,6 +587,11 @@ pub async fn run_headless(
                 shown.meta.cut = false;
                 writer.write(shown)?;
             }
+        }
+        if deferred {
+            // Every frame that arrived is kept; the pusher takes those it
+            // has not taken yet, in order.
+            pusher.push(&mut generator, &kept)?;
         }
         // Skip vsyncs that passed while this slot was prepared, and the
         // slot of the vsync a late image took (its own vsync passed without
