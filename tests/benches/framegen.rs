@@ -27,9 +27,18 @@
 //! and its application (per generated frame); a scene whose shading moves
 //! (`FRAMEGEN_BENCH_SCENE=sun_sweep`) gives them real work.
 //!
+//! `FRAMEGEN_BENCH_STREAM=live` feeds the frames as `client run` receives
+//! them from its in-process server instead of as rendered: depth and
+//! motion through the compact set's quantising codecs, colour through
+//! H.264 at the automatic rate (`client::eval::transport`). Codec noise
+//! makes some passes do more work than on the rendered frames (e.g.
+//! shading correction's estimate, whose "unchanged" test is finer than
+//! the noise).
+//!
 //! `cargo bench -p tests --bench framegen [-- FILTER]`, e.g. `-- wgpu/1280x720`;
-//! `FRAMEGEN_BENCH_SIZES=960x540,1280x720,1920x1080` and
-//! `FRAMEGEN_BENCH_SCENE=default` by default.
+//! `FRAMEGEN_BENCH_SIZES=960x540,1280x720,1920x1080`,
+//! `FRAMEGEN_BENCH_SCENE=default` and `FRAMEGEN_BENCH_STREAM=rendered` by
+//! default.
 
 use std::time::Duration;
 
@@ -115,10 +124,36 @@ fn bench(c: &mut Criterion) {
     }
 }
 
+/// The fed frames as the live client receives them (`FRAMEGEN_BENCH_STREAM`
+/// `live`), or as rendered (`rendered`, the default).
+fn as_streamed(frames: Vec<Frame>, fps: f64) -> Vec<Frame> {
+    let stream = std::env::var("FRAMEGEN_BENCH_STREAM").unwrap_or_else(|_| "rendered".into());
+    match stream.as_str() {
+        "rendered" => frames,
+        "live" => {
+            use client::eval::transport::Transport;
+            let color = video::ColorCodec::DEFAULT_LIVE;
+            let set = protocol::wire::BufferSet::Compact;
+            let mut transport = Transport::new(set, &[color], fps);
+            let mut previous = None;
+            frames
+                .into_iter()
+                .map(|f| {
+                    let meta = f.meta;
+                    let carried = transport.carry(f, previous.as_ref(), 1, color);
+                    previous = Some(meta);
+                    carried.expect("the live stream's codecs")
+                })
+                .collect()
+        }
+        other => panic!("FRAMEGEN_BENCH_STREAM={other}: rendered or live"),
+    }
+}
+
 fn bench_size(c: &mut Criterion, size: FrameSize) {
     let name = scene_name();
     let rendered = tests::render_scene(&name, size, 60.0, 60..76);
-    let frames = framegen::decimate::decimate(&rendered, 2);
+    let frames = as_streamed(framegen::decimate::decimate(&rendered, 2), 30.0);
     let ctx = GpuContext::new().expect("GPU");
     let label = format!("{}x{}", size.width, size.height);
     for gpu in [false, true] {
