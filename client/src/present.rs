@@ -383,12 +383,37 @@ pub async fn run_headless(
     let mut replaced = 0u64;
     let mut k: u64 = 0;
     let last = (config.duration.as_secs_f64() / di.as_secs_f64()).floor() as u64;
+    // Whether the stream may still deliver frames.
+    let mut open = true;
     loop {
         if k > last {
             break;
         }
         let vsync = di * k as u32;
-        tokio::time::sleep_until((start + vsync).into()).await;
+        let due = tokio::time::Instant::from_std(start + vsync);
+        // Interpolation takes frames in as they arrive, and ingests the
+        // one the coming slots go toward at once (or, ready before its
+        // predecessor was shown, right after that): the slot between then
+        // has only its generation to do.
+        while lazy && open {
+            tokio::select! {
+                biased;
+                _ = tokio::time::sleep_until(due) => break,
+                a = session.frames.recv() => {
+                    let Some(a) = a else {
+                        open = false;
+                        break;
+                    };
+                    received += 1;
+                    take_in(a, start, &mut scheduler, (&mut kept, &mut echoes), &mut decode_ms);
+                    if let Some(next) = scheduler.interpolating_toward() {
+                        let due = kept.iter().filter(|f| f.meta.index <= next);
+                        pusher.push(&mut generator, due)?;
+                    }
+                }
+            }
+        }
+        tokio::time::sleep_until(due).await;
         // Everything that arrived since the last vsync, in stream order;
         // only the newest is generated from (the scheduler counts the
         // others as superseded), but every one is pushed: a frame's motion
@@ -429,32 +454,14 @@ pub async fn run_headless(
             let (pose, buttons) = v.source.input(&start_pose, at, now);
             inputs.send(session, (pose, buttons), at)
         });
-        let since = |t: Instant| t.saturating_duration_since(start);
         for a in arrived {
-            decode_ms.push(
-                a.decoded
-                    .saturating_duration_since(a.received)
-                    .as_secs_f64()
-                    * 1e3,
+            take_in(
+                a,
+                start,
+                &mut scheduler,
+                (&mut kept, &mut echoes),
+                &mut decode_ms,
             );
-            let frame = a.frame;
-            if let Some(echo) = a.input {
-                echoes.push_back((frame.meta.index, echo));
-                if echoes.len() > KEPT {
-                    echoes.pop_front();
-                }
-            }
-            scheduler.frame_ready(FrameReady {
-                id: frame.meta.index,
-                sim_time: frame.meta.time,
-                host_processing: frame.meta.host_processing,
-                received_at: since(a.received),
-                ready_at: since(a.decoded),
-            });
-            kept.push_back(frame);
-            if kept.len() > KEPT {
-                kept.pop_front();
-            }
         }
         // The vsync this slot's image was shown at, if it was shown.
         let mut shown_at = None;
@@ -592,6 +599,12 @@ pub async fn run_headless(
             // Every frame that arrived is kept; the pusher takes those it
             // has not taken yet, in order.
             pusher.push(&mut generator, &kept)?;
+        }
+        if let Some(next) = scheduler.interpolating_toward().filter(|_| lazy) {
+            // The frame the next slots go toward was ready before the one
+            // shown now: ingested here, after this slot's image.
+            let due = kept.iter().filter(|f| f.meta.index <= next);
+            pusher.push(&mut generator, due)?;
         }
         // Skip vsyncs that passed while this slot was prepared, and the
         // slot of the vsync a late image took (its own vsync passed without
@@ -751,6 +764,43 @@ impl Pusher {
             .iter()
             .find(|(i, _)| *i == id)
             .map(|(_, t)| *t)
+    }
+}
+
+/// Takes an arrived frame in: its decode time, the scheduler hears it is
+/// ready (times since `start`), and it joins the kept frames (with its
+/// input echo, if any).
+fn take_in(
+    a: crate::Arrived,
+    start: Instant,
+    scheduler: &mut Scheduler,
+    (kept, echoes): (&mut VecDeque<Frame>, &mut VecDeque<(u64, InputEcho)>),
+    decode_ms: &mut Vec<f64>,
+) {
+    let since = |t: Instant| t.saturating_duration_since(start);
+    decode_ms.push(
+        a.decoded
+            .saturating_duration_since(a.received)
+            .as_secs_f64()
+            * 1e3,
+    );
+    let frame = a.frame;
+    if let Some(echo) = a.input {
+        echoes.push_back((frame.meta.index, echo));
+        if echoes.len() > KEPT {
+            echoes.pop_front();
+        }
+    }
+    scheduler.frame_ready(FrameReady {
+        id: frame.meta.index,
+        sim_time: frame.meta.time,
+        host_processing: frame.meta.host_processing,
+        received_at: since(a.received),
+        ready_at: since(a.decoded),
+    });
+    kept.push_back(frame);
+    if kept.len() > KEPT {
+        kept.pop_front();
     }
 }
 

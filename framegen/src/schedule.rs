@@ -202,6 +202,19 @@ impl Scheduler {
         self.drops
     }
 
+    /// The rendered frame the coming slots interpolate toward: the oldest
+    /// pending one once a frame is shown (`Interpolate` only). A generator
+    /// can take it in as soon as it is ready, before the first slot
+    /// between the two.
+    pub fn interpolating_toward(&self) -> Option<u64> {
+        let shown = self.shown.is_some();
+        let interpolating = self.config.policy == Policy::Interpolate;
+        self.pending
+            .front()
+            .filter(|_| shown && interpolating)
+            .map(|f| f.id)
+    }
+
     /// A rendered frame is ready.
     pub fn frame_ready(&mut self, frame: FrameReady) {
         if let Some(h) = self.highest_ready {
@@ -501,6 +514,37 @@ mod tests {
         );
         assert!(interpolated.iter().all(|s| (s.alpha - 0.5).abs() < 0.01));
         assert_eq!(drops, Drops::default());
+    }
+
+    /// What the coming slots interpolate toward is known as soon as that
+    /// frame is ready: the frame after the one shown, never before a frame
+    /// is shown, never for extrapolation; the slots between then go toward
+    /// it.
+    #[test]
+    fn the_frame_interpolated_toward_is_known_when_it_is_ready() {
+        let config = ScheduleConfig::multiple(Policy::Interpolate, 30.0, 1);
+        let mut s = Scheduler::new(config);
+        s.frame_ready(frame(0, 0));
+        s.frame_ready(frame(1, 30));
+        assert_eq!(s.interpolating_toward(), None, "nothing shown yet");
+        assert_eq!(s.vsync(MS(34)).unwrap().source.id, 0);
+        assert_eq!(s.interpolating_toward(), Some(1));
+        let between = s.vsync(MS(50)).unwrap();
+        assert_eq!(
+            (between.kind, between.next.map(|n| n.id)),
+            (SlotKind::Interpolated, Some(1))
+        );
+        s.frame_ready(frame(2, 60));
+        assert_eq!(s.interpolating_toward(), Some(1), "1 is not shown yet");
+        assert_eq!(s.vsync(MS(67)).unwrap().source.id, 1);
+        assert_eq!(s.interpolating_toward(), Some(2));
+        let between = s.vsync(MS(84)).unwrap();
+        assert_eq!(between.next.map(|n| n.id), Some(2));
+        let mut e = Scheduler::new(ScheduleConfig::multiple(Policy::Extrapolate, 30.0, 1));
+        e.frame_ready(frame(0, 0));
+        e.vsync(MS(1));
+        e.frame_ready(frame(1, 30));
+        assert_eq!(e.interpolating_toward(), None);
     }
 
     /// A frame that arrives early once (jitter) is not a lag: no slot is

@@ -230,6 +230,27 @@ async fn interpolation_adds_at_least_one_render_interval() {
         held.len(),
         s.rendered
     );
+    // The frame the slots between go toward is ingested as it arrives:
+    // mostly before the vsync of the first slot between (which is
+    // presented a vsync later), so that slot only generates.
+    let first_between = |id: u64| {
+        r.records
+            .iter()
+            .find(|x| x.kind == SlotKind::Interpolated && x.next == Some(id))
+    };
+    let early = held
+        .iter()
+        .filter(|x| {
+            let between = first_between(x.source).expect("a slot toward it");
+            x.ingested_ms
+                .is_some_and(|i| i < between.present_ms - vsync)
+        })
+        .count();
+    assert!(
+        2 * early >= held.len(),
+        "{early} of {} ingested early",
+        held.len()
+    );
     let added = Percentiles::of(held.iter().filter_map(|x| x.added_latency_ms).collect());
     let latency = Percentiles::of(held.iter().map(|x| x.latency_ms).collect());
     assert!(added.p50 >= vsync - 0.5, "{added:?}");
