@@ -134,13 +134,18 @@ pub struct Slot {
 }
 
 impl Slot {
-    /// Simulation time of what the slot shows: `t + α·Δ`.
+    /// Simulation time of what the slot shows, α render intervals (`Δ`)
+    /// after the frame it comes from: `t + α·Δ`; for an interpolation,
+    /// `t' − (1 − α)·Δ` before the newer frame `t'`. α counts render
+    /// intervals, as the generator takes it (`Descriptor::along`): after a
+    /// gap in the stream (frames that never arrived) the newer frame is
+    /// more than one interval after the older, and the slots between show
+    /// the last interval before it, not a share of the whole gap.
     pub fn sim_time(&self, render_interval: Duration) -> f64 {
+        let interval = render_interval.as_secs_f64();
         match self.next {
-            Some(next) => {
-                self.source.sim_time + self.alpha * (next.sim_time - self.source.sim_time)
-            }
-            None => self.source.sim_time + self.alpha * render_interval.as_secs_f64(),
+            Some(next) => next.sim_time - (1.0 - self.alpha) * interval,
+            None => self.source.sim_time + self.alpha * interval,
         }
     }
 }
@@ -604,6 +609,31 @@ mod tests {
         let ri = Duration::from_secs_f64(1.0 / 30.0);
         for (id, wait) in waits(&slots).into_iter().filter(|&(id, _)| id >= 30) {
             assert!(wait < ri, "frame {id} waited {wait:?}");
+        }
+    }
+
+    /// A slot between two frames shows α render intervals of the last
+    /// interval before the newer one, as the generator makes it: across a
+    /// gap too, where the frame between never arrived.
+    #[test]
+    fn an_interpolated_slot_shows_the_interval_before_the_newer_frame() {
+        let ri = Duration::from_secs_f64(1.0 / 30.0);
+        let slot = |next: u64, alpha: f64| Slot {
+            display_id: 0,
+            vsync: Duration::ZERO,
+            kind: SlotKind::Interpolated,
+            source: frame(10, 0),
+            next: Some(frame(next, 0)),
+            alpha,
+        };
+        let at = |id: u64| id as f64 / 30.0;
+        for alpha in [0.25, 0.5, 0.75] {
+            let between = slot(11, alpha).sim_time(ri);
+            assert!((between - (at(10) + alpha * ri.as_secs_f64())).abs() < 1e-6);
+            // Frame 11 never arrived: the slots before frame 12 show the
+            // interval between 11 and 12.
+            let across = slot(12, alpha).sim_time(ri);
+            assert!((across - (at(11) + alpha * ri.as_secs_f64())).abs() < 1e-6);
         }
     }
 
