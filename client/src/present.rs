@@ -407,8 +407,7 @@ pub async fn run_headless(
                     received += 1;
                     take_in(a, start, &mut scheduler, (&mut kept, &mut echoes), &mut decode_ms);
                     if let Some(next) = scheduler.interpolating_toward() {
-                        let due = kept.iter().filter(|f| f.meta.index <= next);
-                        pusher.push(&mut generator, due)?;
+                        pusher.push_up_to(&mut generator, &kept, next)?;
                     }
                 }
             }
@@ -472,8 +471,7 @@ pub async fn run_headless(
                 pusher.push(&mut generator, &kept)?;
             }
             if let (SlotKind::Interpolated, Some(next)) = (slot.kind, slot.next) {
-                let due = kept.iter().filter(|f| f.meta.index <= next.id);
-                pusher.push(&mut generator, due)?;
+                pusher.push_up_to(&mut generator, &kept, next.id)?;
             }
             // Late input warps what is shown to the newest pose: a rendered
             // frame only while it is the generator's current one.
@@ -603,8 +601,7 @@ pub async fn run_headless(
         if let Some(next) = scheduler.interpolating_toward().filter(|_| lazy) {
             // The frame the next slots go toward was ready before the one
             // shown now: ingested here, after this slot's image.
-            let due = kept.iter().filter(|f| f.meta.index <= next);
-            pusher.push(&mut generator, due)?;
+            pusher.push_up_to(&mut generator, &kept, next)?;
         }
         // Skip vsyncs that passed while this slot was prepared, and the
         // slot of the vsync a late image took (its own vsync passed without
@@ -721,6 +718,17 @@ struct Pusher {
 }
 
 impl Pusher {
+    /// Pushes the kept frames up to frame `id` that come after the last
+    /// pushed one (interpolation: up to the frame the slots go toward).
+    fn push_up_to(
+        &mut self,
+        generator: &mut FrameGenerator,
+        kept: &VecDeque<Frame>,
+        id: u64,
+    ) -> anyhow::Result<()> {
+        self.push(generator, kept.iter().filter(|f| f.meta.index <= id))
+    }
+
     /// Pushes the frames of `due` that come after the last pushed one, in
     /// stream order; one that arrived after a newer one was pushed can no
     /// longer join the history and is left out.
