@@ -26,6 +26,7 @@
 //! an image that missed its vsync is replaced when a fresh one fits before
 //! the next ([`crate::latch`]).
 
+use std::borrow::Cow;
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -550,14 +551,14 @@ pub async fn run_headless(
                         image: image.clone(),
                         stats,
                     },
-                    // The colour is read later only by the writer.
+                    // The colour is read later only by the writer; a
+                    // kept frame's is copied.
                     Shown::Host(frame) => crate::window::Event::Frame {
                         width: frame.meta.size.width,
                         height: frame.meta.size.height,
-                        color: if writer.is_some() {
-                            frame.color.clone()
-                        } else {
-                            std::mem::take(&mut frame.color)
+                        color: match frame {
+                            Cow::Owned(f) if writer.is_none() => std::mem::take(&mut f.color),
+                            f => f.color.clone(),
                         },
                         stats,
                     },
@@ -586,7 +587,8 @@ pub async fn run_headless(
             }
             // Handed over last, when nothing here reads it any more: moved,
             // not copied.
-            if let (Some(writer), Some(Shown::Host(mut shown))) = (writer.as_mut(), image) {
+            if let (Some(writer), Some(Shown::Host(shown))) = (writer.as_mut(), image) {
+                let mut shown = shown.into_owned();
                 // A presented sequence is numbered by display id, uncut.
                 shown.meta.index = slot.display_id;
                 shown.meta.cut = false;
@@ -817,13 +819,13 @@ fn take_in(
 /// `generation` and leaves its passes in `passes`. With `warp` (late
 /// input), every slot is generated with that camera: a rendered or held
 /// frame at α = 0 (re-projected, holes filled as for generated frames).
-fn produce(
+fn produce<'a>(
     slot: &Slot,
     (generator, on_device): (&mut FrameGenerator, Option<&mut DeviceFrames>),
-    kept: &VecDeque<Frame>,
+    kept: &'a VecDeque<Frame>,
     (generation, passes): (&mut Vec<f64>, &mut Vec<framegen::pipeline::Pass>),
     (start, warp): (Instant, Option<Pose>),
-) -> anyhow::Result<(Option<Shown>, Option<Duration>)> {
+) -> anyhow::Result<(Option<Shown<'a>>, Option<Duration>)> {
     let generated = matches!(slot.kind, SlotKind::Extrapolated | SlotKind::Interpolated);
     if !generated && warp.is_none() {
         // Its displayed region (a no-op without a widened window).
@@ -849,7 +851,9 @@ fn produce(
         Some(d) => d
             .generate(generator, alpha, camera)
             .map(|(meta, image)| Shown::Device(meta, image)),
-        None => Ok(Shown::Host(generator.generate_with(alpha, camera)?.frame)),
+        None => Ok(Shown::Host(Cow::Owned(
+            generator.generate_with(alpha, camera)?.frame,
+        ))),
     })?;
     generation.push(t.elapsed().as_secs_f64() * 1e3);
     passes.clear();
@@ -857,14 +861,15 @@ fn produce(
     Ok((Some(shown), Some(start.elapsed())))
 }
 
-/// A slot's image: a frame on the host, or a generated frame left on the
-/// device the window shares, display-encoded there.
-enum Shown {
-    Host(Frame),
+/// A slot's image: a frame on the host (a kept rendered frame borrowed as
+/// it is), or a generated frame left on the device the window shares,
+/// display-encoded there.
+enum Shown<'a> {
+    Host(Cow<'a, Frame>),
     Device(FrameMeta, Arc<crate::display::Image>),
 }
 
-impl Shown {
+impl Shown<'_> {
     fn meta(&self) -> &FrameMeta {
         match self {
             Shown::Host(f) => &f.meta,

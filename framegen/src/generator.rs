@@ -14,6 +14,7 @@
 //! the method, and the stages the stream's effects call for (shading
 //! correction where shading moves, trajectories where objects move).
 
+use std::borrow::Cow;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -180,13 +181,14 @@ impl FrameGenerator {
     /// view of a frame rendered with a widened window, DESIGN §4.5) at the
     /// display size, with the plain view's camera and motion in displayed
     /// pixels; a frame already at the display size with a full window as
-    /// it is. Rendered frames go to the display through this, generated
-    /// ones are made in the displayed view.
-    pub fn displayed(&self, frame: &Frame) -> Result<Frame, FramegenError> {
+    /// it is, borrowed (nothing is copied on the presenter's path for a
+    /// plain window). Rendered frames go to the display through this,
+    /// generated ones are made in the displayed view.
+    pub fn displayed<'a>(&self, frame: &'a Frame) -> Result<Cow<'a, Frame>, FramegenError> {
         frame.validate(&self.limits)?;
         let (_, crop) = displayed_region(&frame.meta, self.settings.display_size);
         if crop.is_identity() {
-            return Ok(frame.clone());
+            return Ok(Cow::Borrowed(frame));
         }
         let p = prepare(frame);
         let color = crate::passes::common::widen::widen(&p.color);
@@ -200,7 +202,7 @@ impl FrameGenerator {
             size: FrameSize { width, height },
             ..frame.meta
         };
-        Ok(finish(meta, 0.0, out)?.frame)
+        Ok(Cow::Owned(finish(meta, 0.0, out)?.frame))
     }
 
     /// The backend's name.
@@ -578,5 +580,34 @@ mod tests {
             finish(meta, 0.5, other),
             Err(FramegenError::Sizes(2, 4, 4, 2))
         ));
+    }
+
+    /// A frame of the display's size with a plain window is shown as it
+    /// is, borrowed; one rendered with a widened window is cropped to the
+    /// display, a frame of its own.
+    #[test]
+    fn a_plain_frame_is_displayed_without_a_copy() {
+        let settings = crate::Settings {
+            display_size: Some((16, 8)),
+            ..crate::Settings::for_method(crate::Method::Gffe)
+        };
+        let g = FrameGenerator::cpu(settings).expect("a CPU generator");
+        let plain = crate::testutil::frame(3, FrameSize::new(16, 8));
+        match g.displayed(&plain).expect("a valid frame") {
+            Cow::Borrowed(f) => assert!(std::ptr::eq(f, &plain)),
+            Cow::Owned(_) => panic!("a plain frame was copied"),
+        }
+        let mut widened = crate::testutil::frame(4, FrameSize::new(20, 10));
+        widened.meta.camera.window = Window {
+            u0: -1.25,
+            v0: -1.25,
+            u1: 1.25,
+            v1: 1.25,
+        };
+        let shown = g.displayed(&widened).expect("a valid frame");
+        assert!(matches!(shown, Cow::Owned(_)));
+        assert_eq!((shown.meta.size.width, shown.meta.size.height), (16, 8));
+        assert!(shown.meta.camera.window.is_full());
+        assert_eq!(shown.color.len(), 16 * 8);
     }
 }
