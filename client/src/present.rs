@@ -891,7 +891,7 @@ struct DeviceFrames {
 }
 
 /// Images in [`DeviceFrames`]' ring.
-const RING: usize = 3;
+pub(crate) const RING: usize = 3;
 
 impl DeviceFrames {
     fn new(shared: crate::window::Shared) -> Self {

@@ -15,6 +15,7 @@
 //! generator shares the window's device ([`Shared`]), a frame it already
 //! generated and display-encoded there.
 
+use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -339,9 +340,11 @@ struct Gfx {
     sampler: wgpu::Sampler,
     /// The display transform into the encoded image's format.
     display: Arc<DisplayPass>,
-    /// The shown frame on the device, and its encoded image bound for the
-    /// blit.
-    image: Option<(Arc<Image>, wgpu::BindGroup)>,
+    /// The frames shown lately on the device, each with its encoded image
+    /// bound for the blit, the shown one first: frames come from a few
+    /// images in turn (the presenter's ring, [`Self::own`]), so each is
+    /// bound once, not per frame.
+    bound: VecDeque<(Arc<Image>, wgpu::BindGroup)>,
     /// Where frames from the host are uploaded and encoded (the shown
     /// frame may instead be one a generator on this device encoded).
     own: Option<Arc<Image>>,
@@ -357,6 +360,10 @@ struct Text {
     renderer: glyphon::TextRenderer,
     buffer: glyphon::Buffer,
 }
+
+/// How many shown images keep their binding: the presenter's ring and the
+/// window's own.
+const BOUND: usize = crate::present::RING + 1;
 
 const BLIT_WGSL: &str = r#"
 @group(0) @binding(0) var image: texture_2d<f32>;
@@ -451,7 +458,7 @@ impl Gfx {
             layout,
             sampler,
             display,
-            image: None,
+            bound: VecDeque::new(),
             own: None,
             target,
             text,
@@ -508,20 +515,32 @@ impl Gfx {
         Ok(())
     }
 
-    /// Shows a frame already display-encoded on this device.
+    /// Shows a frame already display-encoded on this device, with the
+    /// binding its image had if it was shown lately. Images of another
+    /// size than this one are let go.
     fn show_encoded(&mut self, image: Arc<Image>) {
-        let group = bind(
-            &self.gpu.device,
-            &self.layout,
-            &self.sampler,
-            &image.encoded,
-        );
-        self.image = Some((image, group));
+        let size = (image.width, image.height);
+        self.bound.retain(|(i, _)| (i.width, i.height) == size);
+        let known = self.bound.iter().position(|(i, _)| Arc::ptr_eq(i, &image));
+        let entry = match known.and_then(|at| self.bound.remove(at)) {
+            Some(entry) => entry,
+            None => {
+                let group = bind(
+                    &self.gpu.device,
+                    &self.layout,
+                    &self.sampler,
+                    &image.encoded,
+                );
+                (image, group)
+            }
+        };
+        self.bound.push_front(entry);
+        self.bound.truncate(BOUND);
     }
 
     /// Draws the shown frame and the overlay (`stats`) onto the surface.
     fn draw(&mut self, stats: Option<&str>) -> anyhow::Result<()> {
-        let Some((_, image_group)) = &self.image else {
+        let Some((_, image_group)) = self.bound.front() else {
             return Ok(());
         };
         if let Some(stats) = stats {
