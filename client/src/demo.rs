@@ -154,7 +154,10 @@ fn start_local_from(
         effects: spec.effects()?,
     };
     let (feed, source) = if interactive {
-        (Feed::interactive(spec, encoding)?, None)
+        // Each session's renderer, encoder and producer, as the live
+        // stream's below.
+        let opener: host::source::Opener = crate::priority::open_in_background;
+        (Feed::interactive(spec, encoding, Some(opener))?, None)
     } else {
         let frames = Source::channel();
         // The renderer (its driver's threads, the software rasteriser's

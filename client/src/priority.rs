@@ -65,6 +65,17 @@ pub fn start_in_background<T: Send>(
     })
 }
 
+/// A [`host::source::Opener`]: opens an interactive session's source (its
+/// renderer, encoder and producer) with [`start_in_background`]; where no
+/// thread can be started, here, at this thread's priority.
+pub fn open_in_background(open: &mut (dyn FnMut() + Send)) {
+    const WHAT: &str = "an interactive session's source";
+    if let Err(e) = start_in_background(WHAT, &mut *open) {
+        tracing::warn!("{WHAT} opens at normal priority: {e}");
+        open();
+    }
+}
+
 #[cfg(all(test, target_os = "linux"))]
 mod tests {
     use super::*;
@@ -95,5 +106,20 @@ mod tests {
         assert_eq!((own, child), (expected, expected));
         assert_eq!(nice_of_this_thread(), caller);
         assert!(pool.iter().all(|&n| n == caller), "{pool:?} vs {caller}");
+    }
+
+    /// An interactive session's source is opened once, on a thread at the
+    /// lower priority, and the opener returns when it is done.
+    #[test]
+    fn a_session_source_opens_in_the_background() {
+        let caller = nice_of_this_thread();
+        let mut opened = Vec::new();
+        open_in_background(&mut || {
+            let child = std::thread::spawn(nice_of_this_thread).join().unwrap();
+            opened.push((nice_of_this_thread(), child));
+        });
+        let expected = caller.max(BACKGROUND_NICE);
+        assert_eq!(opened, [(expected, expected)]);
+        assert_eq!(nice_of_this_thread(), caller);
     }
 }

@@ -234,13 +234,30 @@ pub enum Feed {
         /// What each session's gate takes (positions around the scene's
         /// origin).
         input: InputLimits,
+        /// Where each session's source is opened (see [`Opener`]); `None`:
+        /// on the session's blocking task.
+        opener: Option<Opener>,
     },
 }
 
+/// Runs the opening of a session's own source ([`Source::open`], which
+/// starts its renderer's and producer's threads) where the process that
+/// embeds the server wants it, and returns when it is done: it calls the
+/// function it is given once. The in-process demo opens them on a thread
+/// of lower priority, which the threads they start inherit, so that a
+/// session's rendering does not take the presenter's time on the same
+/// machine (a standalone server has no use for it).
+pub type Opener = fn(&mut (dyn FnMut() + Send));
+
 impl Feed {
     /// An interactive feed of the scene `spec` ([`Feed::Interactive`]),
-    /// its input bounded around the scene's origin.
-    pub fn interactive(spec: SourceSpec, encoding: Encoding) -> anyhow::Result<Self> {
+    /// its input bounded around the scene's origin, each session's source
+    /// opened by `opener` where one is given.
+    pub fn interactive(
+        spec: SourceSpec,
+        encoding: Encoding,
+        opener: Option<Opener>,
+    ) -> anyhow::Result<Self> {
         let SourceSpec::Scene { spec: scene, .. } = &spec else {
             anyhow::bail!("only a scene can be interactive (a dump has no viewer camera)");
         };
@@ -252,6 +269,7 @@ impl Feed {
                 origin,
                 ..InputLimits::default()
             },
+            opener,
         })
     }
 
@@ -281,14 +299,28 @@ impl Feed {
                 let channel = Source::channel();
                 let frames = channel.subscribe();
                 let keyframes = channel.keyframes();
-                let (viewer, input) = match self {
-                    Feed::Interactive { .. } => {
+                let (viewer, input, opener) = match self {
+                    Feed::Interactive { opener, .. } => {
                         let (tx, rx) = watch::channel(None);
-                        (Some(tx), Some(rx))
+                        (Some(tx), Some(rx), *opener)
                     }
-                    _ => (None, None),
+                    _ => (None, None, None),
                 };
-                let source = Source::open(spec.clone(), encoding.clone(), channel, input)?;
+                let open = || Source::open(spec.clone(), encoding.clone(), channel, input);
+                let source = match opener {
+                    None => open()?,
+                    Some(run) => {
+                        let (mut open, mut opened) = (Some(open), None);
+                        run(&mut || {
+                            if let Some(open) = open.take() {
+                                opened = Some(open());
+                            }
+                        });
+                        opened.ok_or_else(|| {
+                            anyhow::anyhow!("the session's source was never opened")
+                        })??
+                    }
+                };
                 Ok(Subscription {
                     frames,
                     keyframes,

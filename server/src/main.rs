@@ -422,7 +422,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     // (or a looping dump) is one live stream that clients join.
     let per_session = matches!(args.source, SourceSpec::Dump { looped: false, .. });
     let (feed, source) = if args.interactive {
-        (Feed::interactive(args.source, encoding)?, None)
+        (Feed::interactive(args.source, encoding, None)?, None)
     } else if per_session {
         (
             Feed::PerSession {

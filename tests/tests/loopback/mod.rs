@@ -198,7 +198,7 @@ impl Fixture {
             window: Default::default(),
             base: ".".into(),
         };
-        self.second_server(policy, Feed::interactive(spec, encoding).unwrap())
+        self.second_server(policy, Feed::interactive(spec, encoding, None).unwrap())
     }
 
     pub fn start_source(&self) -> Source {
