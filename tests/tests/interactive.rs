@@ -201,3 +201,54 @@ fn static_reprojection_error(cur: &protocol::Frame, prev: &protocol::Frame) -> (
 fn fx_buffers() -> Vec<protocol::wire::StreamBuffer> {
     protocol::wire::StreamBuffer::default_set(protocol::Codec::Zstd).to_vec()
 }
+
+/// How often [`open_elsewhere`] was called.
+static OPENED_ELSEWHERE: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// Opens a session's source on a thread of its own (as the in-process
+/// demo does, at a lower priority) and counts the calls.
+fn open_elsewhere(open: &mut (dyn FnMut() + Send)) {
+    OPENED_ELSEWHERE.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    let caller = std::thread::current().id();
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            assert_ne!(std::thread::current().id(), caller);
+            open();
+        });
+    });
+}
+
+/// An opener that forgets to open.
+fn never_open(_: &mut (dyn FnMut() + Send)) {}
+
+/// An interactive feed's opener opens each session's source once, where
+/// it says; one that never opens it is an error of the subscription, not
+/// a session without frames.
+#[test]
+fn an_interactive_session_source_is_opened_by_the_feed_s_opener() {
+    let spec = |scene: &str| host::source::SourceSpec::Scene {
+        spec: scene.into(),
+        size: SIZE,
+        fps: REPLAY_FPS,
+        window: Default::default(),
+        base: ".".into(),
+    };
+    let encoding =
+        || host::source::Encoding::new(protocol::wire::BufferSet::Lossless, video::ColorCodec::Raw);
+    let feed =
+        host::source::Feed::interactive(spec("builtin:default"), encoding(), Some(open_elsewhere))
+            .unwrap();
+    let subscription = feed.subscribe().expect("the source opens");
+    assert!(subscription.source.is_some() && subscription.viewer.is_some());
+    assert_eq!(
+        OPENED_ELSEWHERE.load(std::sync::atomic::Ordering::SeqCst),
+        1
+    );
+    let forgetful =
+        host::source::Feed::interactive(spec("builtin:default"), encoding(), Some(never_open))
+            .unwrap();
+    let Err(e) = forgetful.subscribe() else {
+        panic!("a source that was never opened was subscribed to");
+    };
+    assert!(e.to_string().contains("never opened"), "{e:#}");
+}
