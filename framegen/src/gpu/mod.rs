@@ -143,15 +143,33 @@ impl GpuContext {
 
     /// Maps `slice` and waits for it (for the submitted work that uses the
     /// buffer first).
+    ///
+    /// The executors wait for their own submissions as they make them, so
+    /// a buffer they map is idle and its mapping ready at the device's next
+    /// check, which does not block. Only a buffer still in use waits for
+    /// the whole device: that would also wait for whatever others sharing
+    /// it (a window presenting from it) submitted since.
     fn map(&self, slice: &wgpu::BufferSlice<'_>, mode: wgpu::MapMode) -> Result<(), FramegenError> {
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(mode, move |r| {
             let _ = tx.send(r);
         });
-        self.wait()?;
-        rx.recv()
-            .map_err(|e| FramegenError::Device(e.to_string()))?
-            .map_err(|e| FramegenError::Device(e.to_string()))
+        let lost = |e: &dyn std::fmt::Display| FramegenError::Device(e.to_string());
+        self.device
+            .poll(wgpu::PollType::Poll)
+            .map_err(|e| lost(&e))?;
+        let mapped = match rx.try_recv() {
+            Ok(mapped) => {
+                // What waiting would have reported.
+                self.gpu.check("submitted work")?;
+                mapped
+            }
+            Err(_) => {
+                self.wait()?;
+                rx.recv().map_err(|e| lost(&e))?
+            }
+        };
+        mapped.map_err(|e| lost(&e))
     }
 
     /// Maps the first `len` bytes of a staging buffer whose copies were
