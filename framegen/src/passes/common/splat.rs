@@ -21,6 +21,11 @@
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::lanes::LANES;
 
+/// Fewest candidates a band of [`resolve_lanes`]' banded splat takes (50
+/// rows of a 1280-pixel frame: a candidate that moves fewer rows than
+/// that lands in its own band, or the next).
+const MIN_BAND: usize = 64 * 1024;
+
 /// "No slot" / "no winner".
 pub const NONE: u32 = u32::MAX;
 
@@ -148,22 +153,62 @@ pub fn resolve_lanes(
         .with_min_len(4096)
         .map(|_| AtomicU64::new(0))
         .collect();
-    let groups = count.div_ceil(LANES);
-    (0..groups)
-        .into_par_iter()
-        .with_min_len(1024)
-        .for_each(|g| {
-            let first = g * LANES;
-            for (i, c) in (first..count).zip(candidates(first)) {
-                let slot = (c.slot as usize).checked_sub(range.start);
-                if let Some(slot) = slot.and_then(|s| packed.get(s)) {
-                    let v = (u64::from(c.key) << 32) | u64::from(!(i as u32));
-                    if v > slot.load(Relaxed) {
-                        slot.fetch_max(v, Relaxed);
+    let value = |i: usize, c: Candidate| (u64::from(c.key) << 32) | u64::from(!(i as u32));
+    let slot_of = |c: Candidate| (c.slot as usize).checked_sub(range.start);
+    if count == packed.len() && count >= 2 * MIN_BAND {
+        // One candidate per slot, most landing near their own index (a
+        // warp of a frame into a frame of its size): each band of
+        // candidates has the band of slots of its own indices to itself
+        // first, and takes them with a plain load and store; what lands
+        // in another band's slots is taken after every band is done,
+        // with the atomic maximum. The same maxima.
+        let bands = 4 * rayon::current_num_threads();
+        let band = count.div_ceil(bands).max(MIN_BAND).next_multiple_of(LANES);
+        let elsewhere: Vec<Vec<(usize, u64)>> = (0..count.div_ceil(band))
+            .into_par_iter()
+            .map(|b| {
+                let own = b * band..((b + 1) * band).min(count);
+                let mut elsewhere = Vec::new();
+                for first in own.clone().step_by(LANES) {
+                    for (i, c) in (first..count).zip(candidates(first)) {
+                        let Some(s) = slot_of(c).filter(|&s| s < packed.len()) else {
+                            continue;
+                        };
+                        let v = value(i, c);
+                        if !own.contains(&s) {
+                            elsewhere.push((s, v));
+                        } else if v > packed[s].load(Relaxed) {
+                            packed[s].store(v, Relaxed);
+                        }
                     }
+                }
+                elsewhere
+            })
+            .collect();
+        elsewhere.par_iter().for_each(|landed| {
+            for &(s, v) in landed {
+                if v > packed[s].load(Relaxed) {
+                    packed[s].fetch_max(v, Relaxed);
                 }
             }
         });
+    } else {
+        let groups = count.div_ceil(LANES);
+        (0..groups)
+            .into_par_iter()
+            .with_min_len(1024)
+            .for_each(|g| {
+                let first = g * LANES;
+                for (i, c) in (first..count).zip(candidates(first)) {
+                    if let Some(slot) = slot_of(c).and_then(|s| packed.get(s)) {
+                        let v = value(i, c);
+                        if v > slot.load(Relaxed) {
+                            slot.fetch_max(v, Relaxed);
+                        }
+                    }
+                }
+            });
+    }
     // In place (same layout), without a second frame-sized allocation.
     let packed = packed.into_iter().map(AtomicU64::into_inner).collect();
     Winners {
@@ -267,5 +312,41 @@ mod tests {
             assert_ne!(depth_key(pair[1]), 0);
             assert_eq!(key_depth(depth_key(pair[0])), pair[0]);
         }
+    }
+
+    /// One candidate per slot, as many as the banded splat takes: the
+    /// same winners as the atomic maximum of each slot one by one, for
+    /// candidates that land in their own band, in others, far away,
+    /// nowhere and outside the range, with ties between bands.
+    #[test]
+    fn the_banded_splat_finds_every_slot_s_nearest() {
+        let n = 3 * MIN_BAND + 123;
+        let noise = |i: usize| (i as f32 * 0.618_034).fract();
+        let candidate = |i: usize| -> Candidate {
+            let slot = match i % 11 {
+                0 => NONE,
+                1 => (n + i) as u32,
+                2 => ((i * 7919) % n) as u32,
+                3..=5 => (i as i64 + (noise(i) * 4000.0) as i64 - 2000).rem_euclid(n as i64) as u32,
+                _ => i as u32,
+            };
+            let depth = [1.0, 2.0, 1.0 + noise(i * 3)][i % 3];
+            Candidate {
+                slot,
+                key: depth_key(depth),
+            }
+        };
+        let banded = resolve_with(n, 0..n, candidate);
+        let mut expected = vec![0u64; n];
+        for i in 0..n {
+            let c = candidate(i);
+            if let Some(e) = expected.get_mut(c.slot as usize) {
+                *e = (*e).max(u64::from(c.key) << 32 | u64::from(!(i as u32)));
+            }
+        }
+        for (s, &e) in expected.iter().enumerate() {
+            assert_eq!(banded.get(s), e, "slot {s}");
+        }
+        assert!(expected.iter().filter(|&&e| e != 0).count() > n / 2);
     }
 }
