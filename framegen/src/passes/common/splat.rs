@@ -102,12 +102,14 @@ impl Winners {
 
 /// CPU reference of the two splat kernels.
 ///
-/// One atomic maximum per candidate over `key << 32 | !index`: the largest
-/// key wins, and among equal keys the largest `!index`, i.e. the smallest
+/// One maximum per candidate over `key << 32 | !index`: the largest key
+/// wins, and among equal keys the largest `!index`, i.e. the smallest
 /// index, which is what the kernels' two rounds pick. A maximum does not
 /// depend on the order it is taken in, so the winners are the same for any
-/// thread count. A candidate that cannot beat the slot's current value
-/// (most of them, where surfaces overlap) skips the atomic read-modify-write.
+/// thread count. It is taken atomically, except where a band of candidates
+/// owns the slots it lands in ([`resolve_lanes`]); a candidate that cannot
+/// beat the slot's current value (most of them, where surfaces overlap)
+/// skips the write.
 pub fn resolve(candidates: &[Candidate], slots: usize) -> Winners {
     resolve_in(candidates, 0..slots)
 }
