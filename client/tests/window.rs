@@ -13,39 +13,59 @@ fn the_window_shows_frames_and_the_overlay() {
 
 /// Issue 15 §2: with the generator on wgpu, the window shares its device,
 /// and generated frames are shown from it without a read-back (the
-/// report counts them; lavapipe here, interpolation its quickest method).
+/// report counts them; lavapipe here).
+///
+/// Extrapolation, because it generates exactly when the stream is late:
+/// on a loaded machine the in-process renderer falls behind, and
+/// interpolation then rightly holds frames instead (its next frame is not
+/// in). A run that generated nothing cannot tell, so it is run again, a
+/// few times at most; a run that generated frames and read any of them
+/// back fails at once.
 #[test]
 fn the_window_shows_frames_generated_on_its_device() {
-    let dir = tempfile::tempdir().unwrap();
-    let report = dir.path().join("report.json");
-    let report_arg = report.to_str().unwrap();
-    shows_frames_and_the_overlay(
-        None,
-        &[
-            "--backend",
-            "wgpu",
-            "--method",
-            "interp",
-            "--json",
-            report_arg,
-        ],
-    );
-    let json: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(&report).expect("report written")).unwrap();
-    let on_device = json["on_device"].as_u64().unwrap();
-    let generated = json["records"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|r| r["kind"] == "interpolated")
-        .count() as u64;
-    assert!(
-        on_device > 0,
-        "no frame stayed on the device: {}",
-        json["backend"]
-    );
-    // Every generated frame shown went that way (none was read back).
-    assert!(on_device >= generated, "{on_device} of {generated}");
+    const TRIES: usize = 3;
+    for attempt in 1..=TRIES {
+        let dir = tempfile::tempdir().unwrap();
+        let report = dir.path().join("report.json");
+        let report_arg = report.to_str().unwrap();
+        let stdout = shows_frames_and_the_overlay(
+            None,
+            &[
+                "--backend",
+                "wgpu",
+                "--method",
+                "gffe",
+                "--seconds",
+                "3",
+                "--json",
+                report_arg,
+            ],
+        );
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&report).expect("report written")).unwrap();
+        let on_device = json["on_device"].as_u64().unwrap();
+        let records = json["records"].as_array().unwrap();
+        let generated = records
+            .iter()
+            .filter(|r| r["kind"] == "extrapolated")
+            .count() as u64;
+        if generated == 0 && attempt < TRIES {
+            eprintln!("attempt {attempt}: no frame generated (a loaded machine?): {stdout}");
+            continue;
+        }
+        assert!(
+            generated > 0,
+            "no frame generated in {TRIES} runs of {} slots: {stdout}",
+            records.len()
+        );
+        // Every generated frame shown went that way (none was read back).
+        assert!(
+            on_device >= generated,
+            "{on_device} of {generated} generated frames stayed on the device ({}): {stdout}",
+            json["backend"]
+        );
+        return;
+    }
 }
 
 /// The same on wgpu's OpenGL backend (EGL on X11), what a machine without
@@ -131,9 +151,10 @@ fn mouse_and_keys_drive_the_viewer_in_a_window() {
     assert!(viewer["inputs"]["sent"].as_u64().unwrap() > 10, "{viewer}");
 }
 
-/// Runs the demo in a window for two seconds with `generator`'s options
-/// (under `WGPU_BACKEND=backend` if given) and checks its screenshot.
-fn shows_frames_and_the_overlay(backend: Option<&str>, generator: &[&str]) {
+/// Runs the demo in a window for two seconds (unless `generator`'s
+/// options say otherwise; under `WGPU_BACKEND=backend` if given), checks
+/// its screenshot and returns its standard output.
+fn shows_frames_and_the_overlay(backend: Option<&str>, generator: &[&str]) -> String {
     let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
     needs("xvfb-run", "xvfb");
     let dir = tempfile::tempdir().unwrap();
@@ -144,16 +165,13 @@ fn shows_frames_and_the_overlay(backend: Option<&str>, generator: &[&str]) {
     }
     cmd.args(["-a", "-s", "-screen 0 1280x720x24"])
         .arg(env!("CARGO_BIN_EXE_client"))
-        .args([
-            "run",
-            "--window",
-            "on",
-            "--seconds",
-            "2",
-            "--size",
-            "160x90",
-        ])
+        .args(["run", "--window", "on", "--size", "160x90"])
         .args(generator)
+        .args(if generator.contains(&"--seconds") {
+            &[][..]
+        } else {
+            &["--seconds", "2"][..]
+        })
         .arg("--screenshot")
         .arg(&shot);
     let stdout = succeeded(&mut cmd);
@@ -189,4 +207,5 @@ fn shows_frames_and_the_overlay(backend: Option<&str>, generator: &[&str]) {
         corner > 100,
         "no overlay text in the top-left corner ({corner} white pixels)"
     );
+    stdout
 }
