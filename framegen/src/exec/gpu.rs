@@ -169,7 +169,7 @@ struct Recorder {
     /// Passes recorded and not yet submitted.
     encoder: Option<wgpu::CommandEncoder>,
     timings: Vec<PassTime>,
-    /// Uniform slots and bind groups, reused from frame to frame.
+    /// Parameter slots and bind groups, reused from frame to frame.
     pool: Pool,
 }
 

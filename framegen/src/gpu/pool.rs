@@ -1,8 +1,9 @@
 //! Bind groups and pass parameters kept from one frame to the next (issue
-//! 15): creating a bind group and a uniform buffer for every dispatch cost
-//! allocations and driver calls on every pass of every frame.
+//! 15): creating a bind group and a parameter buffer for every dispatch
+//! cost allocations and driver calls on every pass of every frame.
 //!
-//! * **Parameters** go into a ring of uniform buffers, one slot per
+//! * **Parameters** go into a ring of small read-only storage buffers
+//!   ([`crate::gpu::Binding::Params`] says why not uniform ones), one slot per
 //!   dispatch of a submission, rewritten with `Queue::write_buffer` (which
 //!   wgpu orders before the submission that reads them, and after the
 //!   submissions before it). The ring restarts at every submission, so a
@@ -20,7 +21,7 @@ use std::collections::HashMap;
 
 use super::GpuContext;
 
-/// Bytes of a uniform slot (every pass's parameters fit; a larger block
+/// Bytes of a parameter slot (every pass's parameters fit; a larger block
 /// gets a larger slot).
 const SLOT_BYTES: u64 = 512;
 
@@ -32,8 +33,8 @@ pub struct Pool {
 
 #[derive(Debug, Default)]
 struct Inner {
-    /// Uniform buffers; `next` is the first one free in this submission.
-    uniforms: Vec<wgpu::Buffer>,
+    /// Parameter buffers; `next` is the first one free in this submission.
+    params: Vec<wgpu::Buffer>,
     next: usize,
     groups: HashMap<(wgpu::BindGroupLayout, Vec<wgpu::Buffer>), wgpu::BindGroup>,
     /// A read-only binding's stand-in where a pass has nothing to bind.
@@ -80,30 +81,30 @@ impl<'a> Rec<'a> {
         Self { ctx, pool }
     }
 
-    /// The next uniform slot of this submission, holding `data`.
-    pub fn uniform(&self, data: &[u8]) -> wgpu::Buffer {
+    /// The next parameter slot of this submission, holding `data`.
+    pub fn params(&self, data: &[u8]) -> wgpu::Buffer {
         let mut inner = self.pool.inner.borrow_mut();
         let i = inner.next;
         inner.next += 1;
         let bytes = (data.len() as u64)
             .next_multiple_of(SLOT_BYTES)
             .max(SLOT_BYTES);
-        if inner.uniforms.get(i).is_none_or(|b| b.size() < bytes) {
+        if inner.params.get(i).is_none_or(|b| b.size() < bytes) {
             let buffer = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("pass params"),
                 size: bytes,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            if i < inner.uniforms.len() {
+            if i < inner.params.len() {
                 // Groups bound to the old slot would keep it alive.
                 inner.groups.clear();
-                inner.uniforms[i] = buffer;
+                inner.params[i] = buffer;
             } else {
-                inner.uniforms.push(buffer);
+                inner.params.push(buffer);
             }
         }
-        let buffer = inner.uniforms[i].clone();
+        let buffer = inner.params[i].clone();
         self.ctx.queue.write_buffer(&buffer, 0, data);
         buffer
     }
@@ -162,7 +163,7 @@ mod tests {
     use crate::gpu::{Binding, Kernel};
 
     const SHADER: &str = "
-@group(0) @binding(0) var<uniform> add: vec4<u32>;
+@group(0) @binding(0) var<storage, read> add: vec4<u32>;
 @group(0) @binding(1) var<storage, read_write> data: array<u32>;
 
 @compute @workgroup_size(256)
@@ -175,7 +176,7 @@ fn add_to(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
 ";
 
     /// Frame after frame, the same dispatches find their bind group and
-    /// their uniform slot again; each dispatch of one submission still
+    /// their parameter slot again; each dispatch of one submission still
     /// reads its own parameters.
     #[test]
     fn dispatches_reuse_their_groups_and_slots() {
@@ -184,7 +185,7 @@ fn add_to(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
             &ctx,
             SHADER,
             "add_to",
-            &[Binding::Uniform, Binding::ReadWrite],
+            &[Binding::Params, Binding::ReadWrite],
         );
         let data = ctx.storage_init("data", bytemuck::cast_slice(&[0u32; 300]));
         let pool = Pool::default();
@@ -193,9 +194,9 @@ fn add_to(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
         for frame in 0..3u32 {
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             // Two dispatches in one submission, with different parameters.
-            let a = gpu.uniform(bytemuck::cast_slice(&[1u32, 0, 0, 0]));
+            let a = gpu.params(bytemuck::cast_slice(&[1u32, 0, 0, 0]));
             kernel.dispatch(&gpu, &mut encoder, &[&a, &data], 300);
-            let b = gpu.uniform(bytemuck::cast_slice(&[10u32, 0, 0, 0]));
+            let b = gpu.params(bytemuck::cast_slice(&[10u32, 0, 0, 0]));
             kernel.dispatch(&gpu, &mut encoder, &[&b, &data], 300);
             ctx.queue.submit([encoder.finish()]);
             pool.restart();

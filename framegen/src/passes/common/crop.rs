@@ -178,7 +178,7 @@ impl GpuCrop {
                 include_str!("crop.wgsl"),
                 "crop",
                 &[
-                    Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                    Params, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
                 ],
             ),
         }
@@ -196,7 +196,7 @@ impl GpuCrop {
         motion: &wgpu::Buffer,
         out: crate::output::GpuOutput<'_>,
     ) {
-        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+        let params = ctx.params(bytemuck::bytes_of(&Params {
             sizes: [c.source.0, c.source.1, c.output.0, c.output.1],
             rect: [c.origin.x, c.origin.y, c.extent.x, c.extent.y],
         }));

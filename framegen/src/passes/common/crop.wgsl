@@ -5,7 +5,7 @@ struct CropParams {
     rect: vec4<f32>,
 };
 
-@group(0) @binding(0) var<uniform> cp: CropParams;
+@group(0) @binding(0) var<storage, read> cp: CropParams;
 @group(0) @binding(1) var<storage, read> color: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> depth: array<f32>;
 @group(0) @binding(3) var<storage, read> motion: array<vec2<f32>>;

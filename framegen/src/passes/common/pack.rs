@@ -181,7 +181,7 @@ impl GpuPack {
                 include_str!("pack.wgsl"),
                 "pack",
                 &[
-                    Uniform, Read, ReadWrite, ReadWrite, Read, ReadWrite, ReadWrite,
+                    Params, Read, ReadWrite, ReadWrite, Read, ReadWrite, ReadWrite,
                 ],
             ),
         }
@@ -197,7 +197,7 @@ impl GpuPack {
         out: crate::output::GpuOutput<'_>,
         packed: GpuPacked<'_>,
     ) {
-        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+        let params = ctx.params(bytemuck::bytes_of(&Params {
             sizes: [n, 0, 0, 0],
         }));
         self.kernel.dispatch(

@@ -5,7 +5,7 @@ struct PackParams {
     sizes: vec4<u32>,
 };
 
-@group(0) @binding(0) var<uniform> kp: PackParams;
+@group(0) @binding(0) var<storage, read> kp: PackParams;
 @group(0) @binding(1) var<storage, read> color: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> depth: array<u32>;
 @group(0) @binding(3) var<storage, read_write> motion: array<vec2<u32>>;

@@ -576,7 +576,7 @@ impl GpuHoles {
         use Binding::*;
         let src = include_str!("pushpull.wgsl");
         let b = &[
-            Uniform, ReadWrite, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+            Params, ReadWrite, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
         ];
         Self {
             pull: Kernel::new(ctx, src, "pp_pull", b),
@@ -616,7 +616,7 @@ impl GpuHoles {
             }
         };
         let run = |kernel: &Kernel, encoder: &mut wgpu::CommandEncoder, dst: u32, src: u32| {
-            let params = ctx.uniform(bytemuck::bytes_of(&Params {
+            let params = ctx.params(bytemuck::bytes_of(&Params {
                 dst: level(dst),
                 src: level(src),
             }));

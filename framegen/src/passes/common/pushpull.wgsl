@@ -10,7 +10,7 @@ struct PpParams {
     src: vec4<u32>,
 };
 
-@group(0) @binding(0) var<uniform> pp: PpParams;
+@group(0) @binding(0) var<storage, read> pp: PpParams;
 @group(0) @binding(1) var<storage, read_write> out_color: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> out_depth: array<f32>;
 @group(0) @binding(3) var<storage, read_write> out_motion: array<vec2<f32>>;

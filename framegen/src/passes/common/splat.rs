@@ -236,7 +236,7 @@ pub struct GpuSplat {
 }
 
 const BINDINGS: &[Binding] = &[
-    Binding::Uniform,
+    Binding::Params,
     Binding::Read,
     Binding::ReadWrite,
     Binding::ReadWrite,
@@ -267,7 +267,7 @@ impl GpuSplat {
     ) {
         encoder.clear_buffer(keys, 0, Some(slots * 4));
         encoder.clear_buffer(index, 0, Some(slots * 4));
-        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+        let params = ctx.params(bytemuck::bytes_of(&Params {
             count: count as u32,
             slots: slots as u32,
             _pad: [0; 2],

@@ -7,7 +7,7 @@ struct SplatParams {
     pad1: u32,
 };
 
-@group(0) @binding(0) var<uniform> sp: SplatParams;
+@group(0) @binding(0) var<storage, read> sp: SplatParams;
 @group(0) @binding(1) var<storage, read> candidates: array<vec2<u32>>;
 @group(0) @binding(2) var<storage, read_write> keys: array<atomic<u32>>;
 @group(0) @binding(3) var<storage, read_write> winners: array<atomic<u32>>;

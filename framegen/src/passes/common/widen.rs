@@ -62,7 +62,7 @@ impl GpuWiden {
                 ctx,
                 include_str!("widen.wgsl"),
                 "widen",
-                &[Uniform, Read, ReadWrite],
+                &[Params, Read, ReadWrite],
             ),
         }
     }
@@ -77,7 +77,7 @@ impl GpuWiden {
         half: &wgpu::Buffer,
         color: &wgpu::Buffer,
     ) {
-        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+        let params = ctx.params(bytemuck::bytes_of(&Params {
             sizes: [n, 0, 0, 0],
         }));
         self.kernel

@@ -4,7 +4,7 @@ struct WidenParams {
     sizes: vec4<u32>,
 };
 
-@group(0) @binding(0) var<uniform> wp: WidenParams;
+@group(0) @binding(0) var<storage, read> wp: WidenParams;
 @group(0) @binding(1) var<storage, read> narrow: array<vec2<u32>>;
 @group(0) @binding(2) var<storage, read_write> color: array<vec4<f32>>;
 

@@ -303,21 +303,21 @@ impl GpuBackground {
                 ctx,
                 src,
                 "bg_init",
-                &[Uniform, Read, Read, Read, Skip, ReadWrite],
+                &[Params, Read, Read, Read, Skip, ReadWrite],
             ),
             project: Kernel::new(
                 ctx,
                 src,
                 "bg_project",
                 &[
-                    Uniform, Skip, Skip, Skip, Read, ReadWrite, Skip, Skip, ReadWrite,
+                    Params, Skip, Skip, Skip, Read, ReadWrite, Skip, Skip, ReadWrite,
                 ],
             ),
             resolve: Kernel::new(
                 ctx,
                 src,
                 "bg_resolve",
-                &[Uniform, Skip, Skip, Skip, Read, ReadWrite, Read, Read],
+                &[Params, Skip, Skip, Skip, Read, ReadWrite, Read, Read],
             ),
         }
     }
@@ -351,7 +351,7 @@ impl GpuBackground {
             let (w, h) = levels.size(l);
             let (w1, h1) = levels.size(l + 1);
             let end = levels.offset((l + 2).min(levels.count));
-            ctx.uniform(bytemuck::bytes_of(&Params {
+            ctx.params(bytemuck::bytes_of(&Params {
                 camera: *camera,
                 shift: [shift[0], shift[1], shift[2], tolerance],
                 config: [n, l, levels.count, 0],

@@ -14,7 +14,7 @@ struct BgParams {
     prev: vec4<u32>,
 };
 
-@group(0) @binding(0) var<uniform> bp: BgParams;
+@group(0) @binding(0) var<storage, read> bp: BgParams;
 @group(0) @binding(1) var<storage, read> positions: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> track: array<u32>;
 @group(0) @binding(3) var<storage, read> color: array<vec4<f32>>;

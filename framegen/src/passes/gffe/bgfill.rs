@@ -175,7 +175,7 @@ impl GpuBgFill {
                 src,
                 "bgfill_project",
                 &[
-                    Uniform, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite, Read, Read,
+                    Params, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite, Read, Read,
                 ],
             ),
             resolve: Kernel::new(
@@ -183,7 +183,7 @@ impl GpuBgFill {
                 src,
                 "bgfill_resolve",
                 &[
-                    Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                    Params, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
                 ],
             ),
         }
@@ -223,7 +223,7 @@ impl GpuBgFill {
             p.target_widths[l] = w;
             p.target_heights[l] = h;
         }
-        ctx.uniform(bytemuck::bytes_of(&p))
+        ctx.params(bytemuck::bytes_of(&p))
     }
 
     /// Records the projection of every texel of the background `bg` (its

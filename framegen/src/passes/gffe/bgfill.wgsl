@@ -19,7 +19,7 @@ struct FillParams {
     seed: vec4<u32>,
 };
 
-@group(0) @binding(0) var<uniform> fp: FillParams;
+@group(0) @binding(0) var<storage, read> fp: FillParams;
 @group(0) @binding(1) var<storage, read> bg: array<BgTexel>;
 @group(0) @binding(2) var<storage, read> keys: array<u32>;
 @group(0) @binding(3) var<storage, read> winners: array<u32>;

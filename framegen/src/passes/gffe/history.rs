@@ -466,7 +466,7 @@ impl GpuHistory {
                 include_str!("history.wgsl"),
                 "history",
                 &[
-                    Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite,
+                    Params, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite,
                 ],
             ),
         }
@@ -495,7 +495,7 @@ impl GpuHistory {
             Some((c, _)) => (**c, c.width(), c.height()),
             None => (*camera, 0, 0),
         };
-        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+        let params = ctx.params(bytemuck::bytes_of(&Params {
             cur: *camera,
             prev: prev_cam,
             sizes: [w, h, pw, ph],

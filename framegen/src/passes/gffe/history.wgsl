@@ -8,7 +8,7 @@ struct HistoryParams {
     epsilon: vec4<f32>,
 };
 
-@group(0) @binding(0) var<uniform> hp: HistoryParams;
+@group(0) @binding(0) var<storage, read> hp: HistoryParams;
 @group(0) @binding(1) var<storage, read> depth: array<f32>;
 @group(0) @binding(2) var<storage, read> motion: array<vec2<f32>>;
 @group(0) @binding(3) var<storage, read> prev_positions: array<vec4<f32>>;

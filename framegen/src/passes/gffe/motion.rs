@@ -105,7 +105,7 @@ impl GpuMotion {
                 ctx,
                 include_str!("motion.wgsl"),
                 "estimate",
-                &[Uniform, Read, Read, ReadWrite],
+                &[Params, Read, Read, ReadWrite],
             ),
         }
     }
@@ -123,7 +123,7 @@ impl GpuMotion {
         k: u32,
         alpha: f32,
     ) {
-        let params = ctx.uniform(bytemuck::bytes_of(&Params {
+        let params = ctx.params(bytemuck::bytes_of(&Params {
             config: [n, k.max(1), 0, 0],
             motion: [alpha, 0.0, 0.0, 0.0],
         }));

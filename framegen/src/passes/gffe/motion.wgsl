@@ -5,7 +5,7 @@ struct MotionParams {
     motion: vec4<f32>,
 };
 
-@group(0) @binding(0) var<uniform> mp: MotionParams;
+@group(0) @binding(0) var<storage, read> mp: MotionParams;
 @group(0) @binding(1) var<storage, read> positions: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> track: array<u32>;
 @group(0) @binding(3) var<storage, read_write> next: array<vec4<f32>>;

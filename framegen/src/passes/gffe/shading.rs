@@ -650,7 +650,7 @@ impl GpuShading {
             ratio: k(
                 "shading_ratio",
                 &[
-                    Uniform, Read, Read, Read, Read, Read, Read, ReadWrite, Skip, Skip, Read,
+                    Params, Read, Read, Read, Read, Read, Read, ReadWrite, Skip, Skip, Read,
                 ],
             ),
             // The ratio and flow planes are written by one entry point and
@@ -658,13 +658,13 @@ impl GpuShading {
             flow: k(
                 "shading_flow",
                 &[
-                    Uniform, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite, ReadWrite, Skip, Skip,
+                    Params, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite, ReadWrite, Skip, Skip,
                 ],
             ),
             correct: k(
                 "shading_correct",
                 &[
-                    Uniform, Read, Skip, Skip, Read, Skip, Skip, ReadWrite, ReadWrite, ReadWrite,
+                    Params, Read, Skip, Skip, Read, Skip, Skip, ReadWrite, ReadWrite, ReadWrite,
                     Skip,
                 ],
             ),
@@ -673,7 +673,7 @@ impl GpuShading {
 
     fn params(ctx: &Rec<'_>, size: (u32, u32), has_prev: bool, alpha: f32) -> wgpu::Buffer {
         let (bw, bh) = blocks(size.0, size.1);
-        ctx.uniform(bytemuck::bytes_of(&Params {
+        ctx.params(bytemuck::bytes_of(&Params {
             size: [size.0, size.1, bw, bh],
             flags: [u32::from(has_prev), 0, 0, 0],
             alpha: [alpha, 0.0, 0.0, 0.0],

@@ -21,7 +21,7 @@ const MAX_STEPS: f32 = 4.0;
 const QUANTUM: f32 = 1.0 / 256.0;
 const COHERENCE: f32 = 0.5;
 
-@group(0) @binding(0) var<uniform> sp: ShadingParams;
+@group(0) @binding(0) var<storage, read> sp: ShadingParams;
 @group(0) @binding(1) var<storage, read> sh_color: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> sh_depth: array<f32>;
 @group(0) @binding(3) var<storage, read> sh_motion: array<vec2<f32>>;

@@ -199,14 +199,14 @@ impl GpuWarp {
                 ctx,
                 src,
                 "warp_project",
-                &[Uniform, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite],
+                &[Params, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite],
             ),
             resolve: Kernel::new(
                 ctx,
                 src,
                 "warp_resolve",
                 &[
-                    Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite, Skip,
+                    Params, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite, Skip,
                     Read, Read,
                 ],
             ),
@@ -215,7 +215,7 @@ impl GpuWarp {
                 src,
                 "warp_cracks",
                 &[
-                    Uniform, Skip, Skip, Skip, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                    Params, Skip, Skip, Skip, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
                 ],
             ),
         }
@@ -230,7 +230,7 @@ impl GpuWarp {
         map: DisplayMap,
         resample: [u32; 2],
     ) -> wgpu::Buffer {
-        ctx.uniform(bytemuck::bytes_of(&Params {
+        ctx.params(bytemuck::bytes_of(&Params {
             target: *target,
             sizes,
             map: map.to_array(),

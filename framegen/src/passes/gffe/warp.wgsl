@@ -13,7 +13,7 @@ struct WarpParams {
     resample: vec4<u32>,
 };
 
-@group(0) @binding(0) var<uniform> wp: WarpParams;
+@group(0) @binding(0) var<storage, read> wp: WarpParams;
 // project: next positions; resolve: source color.
 @group(0) @binding(1) var<storage, read> source: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> keys: array<u32>;

@@ -108,14 +108,14 @@ impl GpuReproject {
                 ctx,
                 src,
                 "interp_normalize",
-                &[Uniform, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite],
+                &[Params, Read, Skip, Skip, Skip, Skip, Skip, Skip, ReadWrite],
             ),
             project: Kernel::new(
                 ctx,
                 src,
                 "interp_project",
                 &[
-                    Uniform, Skip, Read, Skip, Skip, Skip, Skip, Skip, ReadWrite, ReadWrite,
+                    Params, Skip, Read, Skip, Skip, Skip, Skip, Skip, ReadWrite, ReadWrite,
                 ],
             ),
             merge: Kernel::new(
@@ -123,15 +123,14 @@ impl GpuReproject {
                 src,
                 "interp_merge",
                 &[
-                    Uniform, Skip, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
-                    ReadWrite,
+                    Params, Skip, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
                 ],
             ),
         }
     }
 
     fn params(ctx: &Rec<'_>, width: u32, height: u32, alpha: f32) -> wgpu::Buffer {
-        ctx.uniform(bytemuck::bytes_of(&Params {
+        ctx.params(bytemuck::bytes_of(&Params {
             size: [width, height, 0, 0],
             alpha: [alpha, 0.0, 0.0, 0.0],
         }))

@@ -5,7 +5,7 @@ struct InterpParams {
     alpha: vec4<f32>,
 };
 
-@group(0) @binding(0) var<uniform> ip: InterpParams;
+@group(0) @binding(0) var<storage, read> ip: InterpParams;
 @group(0) @binding(1) var<storage, read> motion: array<vec2<f32>>;
 @group(0) @binding(2) var<storage, read> depth: array<f32>;
 @group(0) @binding(3) var<storage, read> winners: array<u32>;

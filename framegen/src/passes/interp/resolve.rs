@@ -150,7 +150,7 @@ impl GpuResolve {
                 &src,
                 "interp_resolve",
                 &[
-                    Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
+                    Params, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite,
                 ],
             ),
         }
@@ -166,7 +166,7 @@ impl GpuResolve {
         (current, previous): (GpuImage<'_>, GpuImage<'_>),
         out: crate::output::GpuOutput<'_>,
     ) {
-        let p = ctx.uniform(bytemuck::bytes_of(&Params {
+        let p = ctx.params(bytemuck::bytes_of(&Params {
             size: [width, height, filter.code(), 0],
             alpha: [alpha, 0.0, 0.0, 0.0],
         }));

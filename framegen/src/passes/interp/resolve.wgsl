@@ -7,7 +7,7 @@ struct ResolveParams {
     alpha: vec4<f32>,
 };
 
-@group(0) @binding(0) var<uniform> rp: ResolveParams;
+@group(0) @binding(0) var<storage, read> rp: ResolveParams;
 @group(0) @binding(1) var<storage, read> cur_color: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> cur_depth: array<f32>;
 @group(0) @binding(3) var<storage, read> prev_color: array<vec4<f32>>;
