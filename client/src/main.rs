@@ -714,7 +714,7 @@ fn session(
             l.server.shutdown().await;
         }
         println!(
-            "method {} on {}: received {} frames, {} vsyncs missed; generation ms p50 {:.2} p99 {:.2}; ingest ms p50 {:.2} p99 {:.2}; decode ms p50 {:.2} p99 {:.2}; history restarts {}",
+            "method {} on {}: received {} frames, {} vsyncs missed; generation ms p50 {:.2} p99 {:.2}; ingest ms p50 {:.2} p99 {:.2}; decode ms p50 {:.2} p99 {:.2}; history restarts {}; frames skipped to keep pace {}",
             report.method,
             report.backend,
             report.received,
@@ -726,6 +726,7 @@ fn session(
             report.decode_ms.p50,
             report.decode_ms.p99,
             report.restarts,
+            report.ingest_skipped,
         );
         println!("  plan: {}", report.plan);
         if !report.passes.is_empty() {

@@ -182,6 +182,9 @@ pub struct Report {
     /// Pushes that restarted the generator's history (the first frame,
     /// cuts, size changes; `framegen::PushOutcome::Restarted`).
     pub restarts: u64,
+    /// Rendered frames extrapolation left out of the history to keep pace
+    /// with the stream (see `Pusher::behind`).
+    pub ingest_skipped: u64,
     /// Latency summary.
     pub summary: Summary,
     /// Reconnections and outages.
@@ -360,6 +363,9 @@ pub async fn run_headless(
         ingested: VecDeque::from([(first.meta.index, Duration::ZERO)]),
         restarts: u64::from(matches!(first_outcome, PushOutcome::Restarted { .. })),
         followed: VecDeque::new(),
+        keep_pace: (policy == Policy::Extrapolate)
+            .then_some(schedule.render_interval.as_secs_f64() * 1e3),
+        skipped: 0,
     };
     let start_pose = first.meta.camera.pose;
     if let Some(ViewerSource::Live(live)) = config.viewer.as_ref().map(|v| &v.source) {
@@ -633,6 +639,7 @@ pub async fn run_headless(
         ingest_ms: Percentiles::of(pusher.ingest_ms),
         decode_ms: Percentiles::of(decode_ms),
         restarts: pusher.restarts,
+        ingest_skipped: pusher.skipped,
         summary,
         outages: session.stats(),
         records: accounting.records().to_vec(),
@@ -717,7 +724,18 @@ struct Pusher {
     /// The newest few frames pushed right after their predecessor (no
     /// gap: every ingest stage had the frame before to work with).
     followed: VecDeque<u64>,
+    /// Extrapolation's render interval, ms: where ingesting a frame takes
+    /// longer than that, a backlog is taken in from its newest frame.
+    keep_pace: Option<f64>,
+    /// Frames left out to keep pace.
+    skipped: u64,
 }
+
+/// Recent ingests [`Pusher::behind`] looks at, and how many of them must
+/// have taken longer than a render interval (one slow ingest is not a
+/// pace).
+const PACE_WINDOW: usize = 4;
+const PACE_SLOW: usize = 3;
 
 impl Pusher {
     /// Pushes the kept frames up to frame `id` that come after the last
@@ -739,12 +757,21 @@ impl Pusher {
         generator: &mut FrameGenerator,
         due: impl IntoIterator<Item = &'a Frame>,
     ) -> anyhow::Result<()> {
-        let mut due: Vec<&Frame> = due.into_iter().collect();
+        let mut due: Vec<&Frame> = due
+            .into_iter()
+            .filter(|f| self.last.is_none_or(|p| f.meta.index > p))
+            .collect();
         due.sort_by_key(|f| f.meta.index);
+        if due.len() > 1 && self.behind() {
+            let skip = due.len() - 1;
+            tracing::debug!(
+                skip,
+                "ingest slower than the stream: taking in its newest frame"
+            );
+            self.skipped += skip as u64;
+            due.drain(..skip);
+        }
         for f in due {
-            if self.last.is_some_and(|p| f.meta.index <= p) {
-                continue;
-            }
             let t = Instant::now();
             let outcome = tokio::task::block_in_place(|| generator.push(f))?;
             self.ingest_ms.push(t.elapsed().as_secs_f64() * 1e3);
@@ -766,6 +793,25 @@ impl Pusher {
             }
         }
         Ok(())
+    }
+
+    /// Whether extrapolation's ingest falls behind the stream: most recent
+    /// ingests took longer than a render interval, so taking in every
+    /// frame of a backlog only grows it (at 640×360 on lavapipe, an
+    /// 80 ms ingest of each of 30 frames a second showed one rendered
+    /// frame in 40 vsyncs and generated none). Then the newest frame alone
+    /// is taken in: the ones before it are a gap in the history, as a
+    /// frame lost on the network is (the generator restarts its
+    /// trajectories from the newest), and the display stays as fresh as
+    /// the ingest allows. Interpolation needs every frame of its pairs and
+    /// never skips.
+    fn behind(&self) -> bool {
+        let Some(interval) = self.keep_pace else {
+            return false;
+        };
+        let recent = &self.ingest_ms[self.ingest_ms.len().saturating_sub(PACE_WINDOW)..];
+        recent.len() == PACE_WINDOW
+            && recent.iter().filter(|&&ms| ms > interval).count() >= PACE_SLOW
     }
 
     /// When frame `id` was ingested, if it was (recently).
@@ -984,4 +1030,66 @@ fn overlay(
         drops.scheduler,
         color_errors,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pusher that has taken in frame 0, with `ingest_ms` for its recent
+    /// ingests and `keep_pace` as the presenter sets it.
+    fn pusher(keep_pace: Option<f64>, ingest_ms: &[f64]) -> Pusher {
+        Pusher {
+            start: Instant::now(),
+            last: Some(0),
+            ingest_ms: ingest_ms.to_vec(),
+            ingested: VecDeque::new(),
+            restarts: 0,
+            followed: VecDeque::new(),
+            keep_pace,
+            skipped: 0,
+        }
+    }
+
+    /// Extrapolation whose ingests mostly take longer than a render
+    /// interval takes a backlog in from its newest frame (the rest are a
+    /// gap); one that keeps pace, interpolation, a lone frame and too few
+    /// ingests to tell take every frame, in order.
+    #[test]
+    fn a_slow_ingest_takes_a_backlog_in_from_its_newest_frame() {
+        let size = protocol::FrameSize::new(16, 9);
+        let frames: Vec<Frame> = (0..5).map(|i| Frame::blank(i, size)).collect();
+        let interval = 1000.0 / 30.0;
+        let slow = [50.0, 50.0, 10.0, 50.0];
+        // (keep pace, recent ingests, frames due, frames taken in)
+        type Case<'a> = (Option<f64>, &'a [f64], std::ops::Range<usize>, &'a [u64]);
+        let cases: [Case; 6] = [
+            (Some(interval), &slow, 1..5, &[4]),
+            (
+                Some(interval),
+                &[50.0, 10.0, 10.0, 50.0],
+                1..5,
+                &[1, 2, 3, 4],
+            ),
+            (None, &slow, 1..5, &[1, 2, 3, 4]),
+            (Some(interval), &slow, 1..2, &[1]),
+            (Some(interval), &[50.0, 50.0, 50.0], 1..5, &[1, 2, 3, 4]),
+            // Frames already taken in are not taken again.
+            (Some(interval), &slow, 0..3, &[2]),
+        ];
+        for (keep_pace, recent, due, taken) in cases {
+            let mut generator = FrameGenerator::cpu(Settings::for_method(Method::Gffe)).unwrap();
+            generator.push(&frames[0]).unwrap();
+            let mut p = pusher(keep_pace, recent);
+            p.push(&mut generator, frames[due.clone()].iter().rev())
+                .unwrap();
+            let ids: Vec<u64> = p.ingested.iter().map(|(id, _)| *id).collect();
+            let case = format!("{keep_pace:?} {recent:?} {due:?}");
+            assert_eq!(ids, taken, "{case}");
+            assert_eq!(p.last, taken.last().copied(), "{case}");
+            // Every new frame due was taken in or counted as left out.
+            let fresh = due.filter(|&i| i > 0).count();
+            assert_eq!(p.skipped as usize, fresh - taken.len(), "{case}");
+        }
+    }
 }
