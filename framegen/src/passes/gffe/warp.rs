@@ -97,13 +97,14 @@ pub fn resolve(
 ) -> Output {
     let (width, height) = how.size;
     let (target, image) = (Columns::new(width), Columns::new(source.size.0));
+    let per_pixel = Vec2::ONE / how.map.scale;
     Output::from_fn(width, height, |t| {
         let Some(i) = winners.winner(t) else {
             return Pixel::EMPTY;
         };
         let center = target.center(t);
         let own = image.center(i);
-        let at = resample::position(own, || landing(i), center, how.map.scale, how.filter);
+        let at = resample::position(own, || landing(i), center, per_pixel, how.filter);
         let c = resample::resample(source, i, at, how.filter);
         Pixel {
             color: [c[0], c[1], c[2], 1.0],

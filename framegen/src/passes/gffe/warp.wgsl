@@ -80,7 +80,8 @@ fn warp_resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) 
     var at = src;
     if mode != RESAMPLE_NEAREST {
         let landing = project(wp.view, landing_next[i]).pixel;
-        at = src + clamp((center - landing) / wp.map.zw, vec2<f32>(-0.5), vec2<f32>(0.5));
+        let per_pixel = vec2<f32>(1.0) / wp.map.zw;
+        at = src + clamp((center - landing) * per_pixel, vec2<f32>(-0.5), vec2<f32>(0.5));
     }
     let c = resample_at(i, at, mode);
     let disp = (at - wp.map.xy) * wp.map.zw;
