@@ -555,7 +555,8 @@ impl Device {
 
     /// Reads a texture (one mip level, one layer, a colour format) back to
     /// the host: its rows, top first, without the copy's row padding. For
-    /// screenshots and tests, not a hot path (it waits for the device).
+    /// screenshots and tests, not a hot path (it waits for its copy, not
+    /// for what others sharing the device submitted after it).
     pub fn read_texture(&self, texture: &wgpu::Texture) -> Result<Vec<u8>, GpuError> {
         let format = texture.format();
         let Some(texel) = format.block_copy_size(None) else {
@@ -588,10 +589,10 @@ impl Device {
             },
             texture.size(),
         );
-        self.queue.submit([encoder.finish()]);
+        let index = self.queue.submit([encoder.finish()]);
         let slice = buffer.slice(..);
         slice.map_async(wgpu::MapMode::Read, |_| {});
-        self.wait()?;
+        self.wait_for(index)?;
         let data = slice.get_mapped_range().map_err(|e| GpuError::Lost {
             adapter: self.describe(),
             reason: format!("mapping a read-back: {e:?}"),
