@@ -74,6 +74,34 @@ impl DisplayMap {
     }
 }
 
+/// A band of whole rows of an [`Output`] being made
+/// ([`Output::from_rows`]).
+#[derive(Debug)]
+pub struct Rows<'a> {
+    first: usize,
+    color: &'a mut [[f32; 4]],
+    depth: &'a mut [f32],
+    motion: &'a mut [[f32; 2]],
+    mask: &'a mut [u32],
+}
+
+impl Rows<'_> {
+    /// The frame's pixel indices the band holds.
+    pub fn pixels(&self) -> std::ops::Range<usize> {
+        self.first..self.first + self.mask.len()
+    }
+
+    /// Sets pixel `t` (of the frame, in [`Rows::pixels`]).
+    #[inline]
+    pub fn set(&mut self, t: usize, p: Pixel) {
+        let k = t - self.first;
+        self.color[k] = p.color;
+        self.depth[k] = p.depth;
+        self.motion[k] = p.motion;
+        self.mask[k] = p.mask;
+    }
+}
+
 /// A generated frame in the making (CPU reference).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Output {
@@ -119,6 +147,40 @@ impl Output {
             motion,
             mask,
         }
+    }
+
+    /// The frame `band` makes, band by band on all cores: each call gets a
+    /// band of whole rows ([`Rows`]), all holes, and sets the pixels it
+    /// makes. For a pass that makes several pixels at once
+    /// (`warp::resolve_runs`); [`Output::from_fn`] is one at a time.
+    pub fn from_rows(width: u32, height: u32, band: impl Fn(Rows<'_>) + Sync + Send) -> Self {
+        use rayon::prelude::*;
+        let n = width as usize * height as usize;
+        let e = Pixel::EMPTY;
+        let mut out = Self {
+            width,
+            height,
+            color: crate::par::filled(e.color, n),
+            depth: crate::par::filled(e.depth, n),
+            motion: crate::par::filled(e.motion, n),
+            mask: crate::par::filled(e.mask, n),
+        };
+        let b = crate::par::band(width as usize, n);
+        (out.color.par_chunks_mut(b))
+            .zip(out.depth.par_chunks_mut(b))
+            .zip(out.motion.par_chunks_mut(b))
+            .zip(out.mask.par_chunks_mut(b))
+            .enumerate()
+            .for_each(|(k, (((color, depth), motion), mask))| {
+                band(Rows {
+                    first: k * b,
+                    color,
+                    depth,
+                    motion,
+                    mask,
+                })
+            });
+        out
     }
 
     /// Number of pixels with the given mask value, counted on all cores (a

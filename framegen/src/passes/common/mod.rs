@@ -14,6 +14,7 @@ pub mod levels;
 pub mod pack;
 pub mod pushpull;
 pub mod resample;
+pub mod resample_run;
 pub mod sample;
 pub mod splat;
 pub mod widen;

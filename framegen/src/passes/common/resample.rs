@@ -166,7 +166,7 @@ pub fn position(
 
 /// Catmull-Rom weights of the four taps around a fraction `f ∈ [0, 1)`.
 #[inline]
-fn catmull_rom(f: f32) -> [f32; 4] {
+pub(crate) fn catmull_rom(f: f32) -> [f32; 4] {
     let f2 = f * f;
     let f3 = f2 * f;
     [
@@ -181,7 +181,7 @@ fn catmull_rom(f: f32) -> [f32; 4] {
 /// rounding instruction): the truncation, one less for negative
 /// non-integers.
 #[inline]
-fn floor(v: f32) -> i32 {
+pub(crate) fn floor(v: f32) -> i32 {
     let t = v as i32;
     t - i32::from(v < t as f32)
 }

@@ -21,10 +21,11 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{CRACK, DisplayMap, GpuOutput, Output, Pixel, WARPED};
+use crate::output::{CRACK, DisplayMap, GpuOutput, Output, Pixel, Rows, WARPED};
 use crate::passes::common::camera::{Columns, PassCamera, cell};
 use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 use crate::passes::common::resample::{self, Resample, Source};
+use crate::passes::common::resample_run::{self, Planes, RUN};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 
 /// CPU reference of `warp_project`: one candidate per source pixel.
@@ -88,31 +89,198 @@ pub struct Resolve {
 /// the sub-pixel position its target pixel's centre maps back to
 /// (`resample.rs`); `landing(i)` is where source pixel `i` lands in the
 /// target. Its motion points to that position in the rendered frame's
-/// displayed region, so colour and motion agree.
+/// displayed region, so colour and motion agree. One pixel at a time;
+/// [`resolve_runs`] is the same frame, faster.
 pub fn resolve(
     winners: &Winners,
     source: Source<'_>,
     landing: impl Fn(usize) -> Vec2 + Sync + Send,
     how: Resolve,
 ) -> Output {
-    let (width, height) = how.size;
-    let (target, image) = (Columns::new(width), Columns::new(source.size.0));
-    let per_pixel = Vec2::ONE / how.map.scale;
-    Output::from_fn(width, height, |t| {
-        let Some(i) = winners.winner(t) else {
-            return Pixel::EMPTY;
-        };
-        let center = target.center(t);
-        let own = image.center(i);
-        let at = resample::position(own, || landing(i), center, per_pixel, how.filter);
-        let c = resample::resample(source, i, at, how.filter);
-        Pixel {
-            color: [c[0], c[1], c[2], 1.0],
-            depth: winners.depth(t).unwrap_or(f32::INFINITY),
-            motion: (how.map.apply(at) - center).to_array(),
-            mask: WARPED,
+    resolve_with(winners, source, None, landing, how, Isa::Baseline)
+}
+
+/// [`resolve`], bit for bit, with runs of [`RUN`] target pixels won by
+/// consecutive source pixels filtered at once (`resample_run.rs`) from
+/// `planes`, the colour planes of `source` ([`Planes::fill`]); with AVX2
+/// where the CPU has it (eight lanes a register instead of four).
+pub fn resolve_runs(
+    winners: &Winners,
+    source: Source<'_>,
+    planes: &Planes,
+    landing: impl Fn(usize) -> Vec2 + Sync + Send,
+    how: Resolve,
+) -> Output {
+    resolve_with(winners, source, Some(planes), landing, how, Isa::detect())
+}
+
+/// The instructions [`resolve_runs`] is compiled for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Isa {
+    /// The build's target (SSE2 on x86-64).
+    Baseline,
+    /// AVX2, chosen at run time.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
+impl Isa {
+    /// The best the CPU has.
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            return Isa::Avx2;
         }
+        Isa::Baseline
+    }
+}
+
+fn resolve_with<F: Fn(usize) -> Vec2 + Sync + Send>(
+    winners: &Winners,
+    source: Source<'_>,
+    planes: Option<&Planes>,
+    landing: F,
+    how: Resolve,
+    isa: Isa,
+) -> Output {
+    let (width, height) = how.size;
+    let resolver = Resolver {
+        winners,
+        source,
+        planes: planes.filter(|p| p.usable(source.color.len())),
+        landing,
+        how,
+        per_pixel: Vec2::ONE / how.map.scale,
+        target: Columns::new(width),
+        image: Columns::new(source.size.0),
+    };
+    Output::from_rows(width, height, |rows| match isa {
+        Isa::Baseline => resolver.band(rows),
+        // SAFETY: `Isa::detect` found AVX2 on this CPU.
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 => unsafe { resolver.band_avx2(rows) },
     })
+}
+
+/// What [`resolve`] reads, and the band loop that writes its pixels.
+struct Resolver<'a, F> {
+    winners: &'a Winners,
+    source: Source<'a>,
+    planes: Option<&'a Planes>,
+    landing: F,
+    how: Resolve,
+    /// Source pixels per target pixel (`resample::position`).
+    per_pixel: Vec2,
+    target: Columns,
+    image: Columns,
+}
+
+impl<F: Fn(usize) -> Vec2> Resolver<'_, F> {
+    /// Where target pixel `t`, won by `i`, takes its colour from.
+    #[inline(always)]
+    fn at(&self, t: usize, i: usize) -> Vec2 {
+        self.at_centers(i, self.target.center(t), self.image.center(i))
+    }
+
+    /// [`Resolver::at`] given the centres of the target pixel and of `i`.
+    #[inline(always)]
+    fn at_centers(&self, i: usize, center: Vec2, own: Vec2) -> Vec2 {
+        resample::position(
+            own,
+            || (self.landing)(i),
+            center,
+            self.per_pixel,
+            self.how.filter,
+        )
+    }
+
+    /// Writes won pixel `t` with colour `c` from position `at`.
+    #[inline(always)]
+    fn set(&self, rows: &mut Rows<'_>, t: usize, at: Vec2, c: [f32; 3]) {
+        rows.set(
+            t,
+            Pixel {
+                color: [c[0], c[1], c[2], 1.0],
+                depth: self.winners.depth(t).unwrap_or(f32::INFINITY),
+                motion: (self.how.map.apply(at) - self.target.center(t)).to_array(),
+                mask: WARPED,
+            },
+        );
+    }
+
+    /// Target pixel `t` alone.
+    #[inline(always)]
+    fn one(&self, rows: &mut Rows<'_>, t: usize) {
+        let Some(i) = self.winners.winner(t) else {
+            return;
+        };
+        let at = self.at(t, i);
+        let c = resample::resample(self.source, i, at, self.how.filter);
+        self.set(rows, t, at, c);
+    }
+
+    /// Target pixels `t .. t + RUN` (in one row): at once where their
+    /// winners are consecutive source pixels of one row and the run's
+    /// filter takes them, else one by one.
+    #[inline(always)]
+    fn run(&self, rows: &mut Rows<'_>, t: usize, planes: &Planes) {
+        let source_width = self.source.size.0;
+        let first = self.winners.winner(t);
+        let first = first.filter(|&i| self.image.split(i as u32).0 + RUN as u32 <= source_width);
+        // Without early exits: most runs are consecutive.
+        let mut consecutive = first.is_some();
+        let first = first.unwrap_or(0);
+        for l in 1..RUN {
+            consecutive &= self.winners.stored(t + l) == !((first + l) as u32);
+        }
+        if !consecutive {
+            for t in t..t + RUN {
+                self.one(rows, t);
+            }
+            return;
+        }
+        // The centres of the run's pixels and of their winners are those of
+        // its first ones moved by whole pixels (exact: half-integers).
+        let (center, own) = (self.target.center(t), self.image.center(first));
+        let mut at = [Vec2::ZERO; RUN];
+        for (l, at) in at.iter_mut().enumerate() {
+            let step = Vec2::new(l as f32, 0.0);
+            *at = self.at_centers(first + l, center + step, own + step);
+        }
+        let filter = self.how.filter;
+        let colors = resample_run::run(self.source, planes, first, &at, filter);
+        for l in 0..RUN {
+            let c = match &colors {
+                Some(c) => c[l],
+                None => resample::resample(self.source, first + l, at[l], filter),
+            };
+            self.set(rows, t + l, at[l], c);
+        }
+    }
+
+    /// Every pixel of a band of rows.
+    #[inline(always)]
+    fn band(&self, mut rows: Rows<'_>) {
+        let width = self.how.size.0 as usize;
+        for row in rows.pixels().step_by(width.max(1)) {
+            let mut x = 0;
+            if let Some(planes) = self.planes {
+                while x + RUN <= width {
+                    self.run(&mut rows, row + x, planes);
+                    x += RUN;
+                }
+            }
+            (row + x..row + width).for_each(|t| self.one(&mut rows, t));
+        }
+    }
+
+    /// [`Resolver::band`] compiled for AVX2: the run's lanes fill one
+    /// register.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn band_avx2(&self, rows: Rows<'_>) {
+        self.band(rows)
+    }
 }
 
 /// Largest ratio between the depths of a crack's two neighbours: one
@@ -314,6 +482,133 @@ pub struct GpuSource<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The runs of `resample_run.rs` resolve the same frame as the pixels
+    /// one by one, bit for bit, on the build's instructions and on AVX2:
+    /// a textured image with flat patches, highlights, edges between
+    /// surfaces, sky and points with no surface, warped by a smooth
+    /// sub-pixel pan and zoom (most runs taken at once), with a filter
+    /// the runs do not take and with a source that is not opaque.
+    #[test]
+    fn runs_resolve_as_pixels_one_by_one() {
+        use crate::passes::common::splat;
+        let (w, h) = (97u32, 61u32);
+        let n = (w * h) as usize;
+        let noise = |i: usize| ((i as f32 * 0.618_034).fract() * 7.31).fract();
+        let color: Vec<[f32; 4]> = (0..n)
+            .map(|i| {
+                let (x, y) = (i % w as usize, i / w as usize);
+                let v = match (x / 16 + y / 16) % 3 {
+                    0 => 0.25,                                     // flat
+                    1 => 0.1 + noise(i),                           // texture
+                    _ => [0.5, 60000.0][usize::from(i % 23 == 0)], // highlights
+                };
+                [v, v * 0.5 + noise(i + 1) * 0.01, 1.0 - v.min(1.0), 1.0]
+            })
+            .collect();
+        let depth: Vec<f32> = (0..n)
+            .map(|i| {
+                let (x, y) = (i % w as usize, i / w as usize);
+                match (x * 5 / w as usize, y % 29) {
+                    (_, 0) => 0.0,
+                    (0, _) => f32::INFINITY,
+                    (1, _) => 2.0 + 0.001 * x as f32,
+                    _ => 3.0 + 0.002 * y as f32 + 0.05 * noise(i),
+                }
+            })
+            .collect();
+        // Source pixel `i` lands at its centre zoomed about the middle and
+        // panned by a fraction of a pixel.
+        let (image, middle) = (Columns::new(w), Vec2::new(w as f32, h as f32) * 0.5);
+        let land = |i: usize| (image.center(i) - middle) * 1.013 + middle + Vec2::new(0.37, -0.21);
+        let candidates: Vec<Candidate> = (0..n)
+            .map(|i| match cell(land(i), w, h, 1.0) {
+                Some(slot) if depth[i] > 0.0 => Candidate {
+                    slot,
+                    key: depth_key(depth[i]),
+                },
+                _ => Candidate::MISS,
+            })
+            .collect();
+        let winners = splat::resolve(&candidates, n);
+        let bits = |o: &Output| {
+            let c = o.color.iter().flatten().map(|v| v.to_bits());
+            let d = o.depth.iter().map(|v| v.to_bits());
+            let m = o.motion.iter().flatten().map(|v| v.to_bits());
+            (
+                c.collect::<Vec<_>>(),
+                d.collect::<Vec<_>>(),
+                m.collect::<Vec<_>>(),
+                o.mask.clone(),
+            )
+        };
+        let map = DisplayMap {
+            offset: Vec2::new(1.5, -0.5),
+            scale: Vec2::new(0.75, 0.75),
+        };
+        let mut isas = vec![Isa::Baseline];
+        if Isa::detect() != Isa::Baseline {
+            isas.push(Isa::detect());
+        }
+        let target = Columns::new(w);
+        let (mut runs, mut taken) = (0, 0);
+        for (filter, opaque) in [
+            (Resample::CatmullRom, true),
+            (Resample::Bilinear, true),
+            (Resample::CatmullRom, false),
+        ] {
+            let mut color = color.clone();
+            if !opaque {
+                color[n / 2][3] = 0.5;
+            }
+            let source = Source {
+                color: &color,
+                depth: &depth,
+                size: (w, h),
+            };
+            let mut planes = Planes::default();
+            planes.fill(&color);
+            assert_eq!(planes.usable(n), opaque);
+            for map in [DisplayMap::IDENTITY, map] {
+                let how = Resolve {
+                    map,
+                    filter,
+                    size: (w, h),
+                };
+                let one = bits(&resolve(&winners, source, land, how));
+                for &isa in &isas {
+                    let runs = resolve_with(&winners, source, Some(&planes), land, how, isa);
+                    assert!(one == bits(&runs), "{filter} {isa:?} {map:?}");
+                }
+            }
+            if (filter, opaque) != (Resample::CatmullRom, true) {
+                continue;
+            }
+            // Most runs of the textured, opaque case are taken at once.
+            for t in (0..n).step_by(RUN) {
+                let Some(first) = winners.winner(t) else {
+                    continue;
+                };
+                if target.split(t as u32).0 + RUN as u32 > w
+                    || (0..RUN).any(|l| winners.winner(t + l) != Some(first + l))
+                    || image.split(first as u32).0 + RUN as u32 > w
+                {
+                    continue;
+                }
+                let at: [Vec2; RUN] = std::array::from_fn(|l| {
+                    let (i, c) = (first + l, target.center(t + l));
+                    resample::position(image.center(i), || land(i), c, Vec2::ONE, filter)
+                });
+                runs += 1;
+                let run = resample_run::run(source, &planes, first, &at, filter);
+                taken += usize::from(run.is_some());
+            }
+        }
+        assert!(
+            runs > 300 && taken * 2 > runs,
+            "{taken} of {runs} runs taken"
+        );
+    }
 
     /// Four positions at a time land where each lands alone: points on and
     /// off the target, behind it, skies, nothing and NaN, seen from a

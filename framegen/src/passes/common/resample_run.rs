@@ -1,0 +1,249 @@
+//! The resampling filter of `resample.rs` for a run of [`RUN`] target
+//! pixels at once (issue 15: the filter was half of the CPU warp's time,
+//! paid one pixel at a time).
+//!
+//! Under a smooth warp most target pixels of a row are won by consecutive
+//! source pixels of one row, shifted by the same whole number of pixels:
+//! then tap column `i` of row `j` of the run's [`RUN`] filters is one
+//! stretch of [`RUN`] consecutive source pixels, a single load per channel
+//! from the source's colour [`Planes`]. The weights, the flat test, the
+//! surface test and the clamp are computed lane by lane, on arrays the
+//! compiler turns into vector instructions ([`RUN`] = 8: one AVX register
+//! where the CPU has it, see `warp.rs`).
+//!
+//! [`run`] is [`resample::resample`] of each pixel, bit for bit: every lane
+//! performs the same IEEE operations in the same order (`min`/`max` as
+//! SSE2's `minps`/`maxps`, which glam uses; Rust forms no fused
+//! multiply-add). Where a run does not fit (winners not in a row, a
+//! shifted window, the image's border, a pixel off its surface that is
+//! not flat, a filter other than Catmull-Rom), it answers `None` and each
+//! pixel takes [`resample::resample`]; `warp.rs` tests the two against
+//! each other.
+
+// Lane loops index by lane on purpose: the iterator and `array::map`
+// forms were left as calls in the AVX2 band (`warp.rs`), which made the
+// runs slower than the pixels one by one.
+#![allow(clippy::needless_range_loop)]
+
+use glam::Vec2;
+
+use crate::passes::common::resample::{self, FLAT, Resample, SAME_SURFACE_RATIO, Source};
+
+/// Target pixels per run.
+pub const RUN: usize = 8;
+
+/// Source pixels a row of a run's taps spans.
+const SPAN: usize = RUN + 3;
+
+/// One value per pixel of a run.
+type Lanes = [f32; RUN];
+
+/// A source image's colour as planes of one channel: a run's tap is one
+/// stretch of each. Its buffers are reused from frame to frame.
+#[derive(Debug, Default)]
+pub struct Planes {
+    red: Vec<f32>,
+    green: Vec<f32>,
+    blue: Vec<f32>,
+    /// Whether every alpha is 1: the filters' flat test reads alpha too
+    /// (as one lane of the pixel's `Vec4`), and the planes do not hold it.
+    /// Prepared frames are opaque (`input.rs`); where one is not, no run is
+    /// taken.
+    opaque: bool,
+}
+
+impl Planes {
+    /// The planes of `color`, written on all cores into the buffers kept.
+    pub fn fill(&mut self, color: &[[f32; 4]]) {
+        use rayon::prelude::*;
+        let n = color.len();
+        for plane in [&mut self.red, &mut self.green, &mut self.blue] {
+            plane.resize(n, 0.0);
+        }
+        const BLOCK: usize = 4096;
+        let planes = (self.red.par_chunks_mut(BLOCK))
+            .zip(self.green.par_chunks_mut(BLOCK))
+            .zip(self.blue.par_chunks_mut(BLOCK))
+            .zip(color.par_chunks(BLOCK));
+        self.opaque = planes
+            .map(|(((r, g), b), c)| {
+                let mut opaque = true;
+                for (k, p) in c.iter().enumerate() {
+                    (r[k], g[k], b[k]) = (p[0], p[1], p[2]);
+                    opaque &= p[3] == 1.0;
+                }
+                opaque
+            })
+            .reduce(|| true, |a, b| a & b);
+    }
+
+    /// Whether these are the planes of an image of `n` pixels that runs
+    /// can be taken from.
+    pub fn usable(&self, n: usize) -> bool {
+        self.opaque && self.red.len() == n
+    }
+}
+
+/// `resample::catmull_rom` of every lane's fraction, tap by tap.
+#[inline(always)]
+fn weights(f: &Lanes) -> [Lanes; 4] {
+    let mut w = [[0.0; RUN]; 4];
+    for l in 0..RUN {
+        let c = resample::catmull_rom(f[l]);
+        for i in 0..4 {
+            w[i][l] = c[i];
+        }
+    }
+    w
+}
+
+/// SSE2's `minps` of one lane (glam's `Vec4::min`): `b` unless `a < b`.
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// SSE2's `maxps` of one lane (glam's `Vec4::max`): `b` unless `a > b`.
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// The four rows of [`SPAN`] taps of `plane` whose first is at `base`,
+/// `stride` apart, or `None` past its end.
+#[inline(always)]
+fn taps(plane: &[f32], base: usize, stride: usize) -> Option<[&[f32; SPAN]; 4]> {
+    let row = |j: usize| -> Option<&[f32; SPAN]> {
+        let first = base + j * stride;
+        plane.get(first..first + SPAN)?.try_into().ok()
+    };
+    Some([row(0)?, row(1)?, row(2)?, row(3)?])
+}
+
+/// The colours [`resample::resample`] gives the [`RUN`] target pixels
+/// whose winners are the source pixels `first .. first + RUN` (consecutive
+/// in one row of `src`), at positions `at` (`resample::position`), with
+/// filter `mode`; `None` where the run cannot be taken at once (see the
+/// module doc). `planes` are `src`'s colour, [`Planes::usable`].
+#[inline(always)]
+pub fn run(
+    src: Source<'_>,
+    planes: &Planes,
+    first: usize,
+    at: &[Vec2; RUN],
+    mode: Resample,
+) -> Option<[[f32; 3]; RUN]> {
+    if mode != Resample::CatmullRom {
+        return None;
+    }
+    let (w, h) = (src.size.0 as i32, src.size.1 as i32);
+    // Each lane's window: its inner top-left tap one column past the
+    // previous lane's, all in one row, all inside the image.
+    let q0 = at[0] - 0.5;
+    let (bx, by) = (resample::floor(q0.x), resample::floor(q0.y));
+    let (mut fx, mut fy) = ([0.0; RUN], [0.0; RUN]);
+    let mut shifted = false;
+    for l in 0..RUN {
+        let q = at[l] - 0.5;
+        let x = bx + l as i32;
+        shifted |= (resample::floor(q.x) != x) | (resample::floor(q.y) != by);
+        fx[l] = q.x - x as f32;
+        fy[l] = q.y - by as f32;
+    }
+    if shifted || bx < 1 || by < 1 || bx + RUN as i32 + 1 >= w || by + 2 >= h {
+        return None;
+    }
+    let stride = w as usize;
+    let base = (by - 1) as usize * stride + (bx - 1) as usize;
+    let depth = taps(src.depth, base, stride)?;
+    let red = taps(&planes.red, base, stride)?;
+    let green = taps(&planes.green, base, stride)?;
+    let blue = taps(&planes.blue, base, stride)?;
+    let own = src.depth.get(first..first + RUN)?;
+
+    // Per lane: the inner 2×2 taps' range per channel (in `Taps::filter`'s
+    // order) and whether it is flat; whether all 16 depths are on the
+    // lane's own surface (`all_on_surface`).
+    let mut lo = [[0.0; RUN]; 3];
+    let mut hi = [[0.0; RUN]; 3];
+    let mut flat = [true; RUN];
+    for (k, c) in [red, green, blue].iter().enumerate() {
+        for l in 0..RUN {
+            let t = [c[1][l + 1], c[1][l + 2], c[2][l + 1], c[2][l + 2]];
+            let (a, b) = (
+                min(min(t[0], t[1]), min(t[2], t[3])),
+                max(max(t[0], t[1]), max(t[2], t[3])),
+            );
+            lo[k][l] = a;
+            hi[k][l] = b;
+            // Alpha is 1 throughout (`Planes::usable`): flat.
+            flat[l] &= b - a <= b * FLAT;
+        }
+    }
+    if flat == [true; RUN] {
+        let mut out = [[0.0; 3]; RUN];
+        for l in 0..RUN {
+            let c = src.color[first + l];
+            out[l] = [c[0], c[1], c[2]];
+        }
+        return Some(out);
+    }
+    let mut near = [0.0; RUN];
+    let mut far = [0.0; RUN];
+    let mut nan = [false; RUN];
+    near.copy_from_slice(own);
+    far.copy_from_slice(own);
+    for row in depth {
+        for i in 0..4 {
+            for l in 0..RUN {
+                let d = row[i + l];
+                near[l] = min(near[l], d);
+                far[l] = max(far[l], d);
+                nan[l] |= d.is_nan();
+            }
+        }
+    }
+    let mut taken = true;
+    for l in 0..RUN {
+        let d0 = own[l];
+        let on = !nan[l]
+            & (near[l] > 0.0)
+            & (far[l] <= d0 * SAME_SURFACE_RATIO)
+            & (d0 <= near[l] * SAME_SURFACE_RATIO);
+        // A lane neither flat nor on its surface takes the bilinear taps:
+        // the run is left to the pixels one by one.
+        taken &= flat[l] | on;
+    }
+    if !taken {
+        return None;
+    }
+
+    // Separable Catmull-Rom, each row along x, then the rows along y, in
+    // `Taps::filter`'s order; clamped to the inner taps' range.
+    let (wx, wy) = (weights(&fx), weights(&fy));
+    let mut out = [[0.0; 3]; RUN];
+    for (k, c) in [red, green, blue].iter().enumerate() {
+        let mut sum = [0.0; RUN];
+        for j in 0..4 {
+            let mut across = [0.0; RUN];
+            for i in 0..4 {
+                for l in 0..RUN {
+                    across[l] += c[j][i + l] * wx[i][l];
+                }
+            }
+            for l in 0..RUN {
+                sum[l] += across[l] * wy[j][l];
+            }
+        }
+        for l in 0..RUN {
+            out[l][k] = min(max(sum[l], lo[k][l]), hi[k][l]);
+        }
+    }
+    for l in 0..RUN {
+        if flat[l] {
+            let c = src.color[first + l];
+            out[l] = [c[0], c[1], c[2]];
+        }
+    }
+    Some(out)
+}
