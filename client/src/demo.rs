@@ -14,6 +14,7 @@ use protocol::FrameSize;
 use protocol::wire::{BufferSet, WindowMode};
 use scene::render::WindowSettings;
 
+use crate::priority::Background;
 use crate::{ConnectConfig, Pin, Stream};
 
 /// A running in-process server and its source.
@@ -44,17 +45,21 @@ pub struct Link {
     pub interactive: bool,
     /// The adaptive rendering window of a scene (`serve --window`).
     pub window: WindowMode,
+    /// How far the in-process server's rendering, encoding and producing
+    /// step back from the presenter's and the generator's work.
+    pub server_priority: Background,
 }
 
 impl Default for Link {
     /// Cubic, colour through H.264 at the automatic rate, no adaptive
-    /// window.
+    /// window, the server at [`Background::Low`].
     fn default() -> Self {
         Self {
             congestion: Congestion::default(),
             color: video::ColorCodec::DEFAULT_LIVE,
             interactive: false,
             window: WindowMode::Off,
+            server_priority: Background::Low,
         }
     }
 }
@@ -156,7 +161,10 @@ fn start_local_from(
     let (feed, source) = if interactive {
         // Each session's renderer, encoder and producer, as the live
         // stream's below.
-        let opener: host::source::Opener = crate::priority::open_in_background;
+        let opener: host::source::Opener = match link.server_priority {
+            Background::Low => crate::priority::open_in_background,
+            Background::Idle => crate::priority::open_idle,
+        };
         (Feed::interactive(spec, encoding, Some(opener))?, None)
     } else {
         let frames = Source::channel();
@@ -165,7 +173,8 @@ fn start_local_from(
         // priority: they stand in for a remote machine, and on this one
         // they must not take the presenter's and the generator's time.
         let channel = frames.clone();
-        let source = crate::priority::start_in_background("the in-process server", || {
+        let what = "the in-process server";
+        let source = crate::priority::start_at(what, link.server_priority, || {
             Source::start(spec, encoding, channel)
         })??;
         (Feed::Live(frames), Some(source))

@@ -156,6 +156,14 @@ struct RunArgs {
     /// (README, "Evaluate"); `serve` renders keep-density by default.
     #[arg(long, default_value = "off", value_parser = clap::value_parser!(WindowMode))]
     render_window: WindowMode,
+    /// How far the in-process server's rendering and encoding step back
+    /// from the presenter and the generator on this machine's cores:
+    /// `low` (nice 10) or `idle` (Linux's SCHED_IDLE: only time nothing
+    /// else wants; fewer missed vsyncs where the server and the client
+    /// share few cores, but a machine busy with other work starves the
+    /// server). README, "Live demo".
+    #[arg(long, value_enum, default_value_t = client::priority::Background::Low)]
+    server_priority: client::priority::Background,
 }
 
 impl Default for RunArgs {
@@ -610,6 +618,7 @@ fn session(
         color: args.color_codec,
         interactive: args.interactive,
         window: args.render_window,
+        server_priority: args.server_priority,
     };
     runtime.block_on(async move {
         let local = match args.server {
