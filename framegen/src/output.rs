@@ -91,6 +91,24 @@ impl Rows<'_> {
         self.first..self.first + self.mask.len()
     }
 
+    /// Sets the `N` pixels from `t` on (of the frame, in [`Rows::pixels`])
+    /// to `color`, `depth`, `motion` and `mask`.
+    #[inline]
+    pub fn set_run<const N: usize>(
+        &mut self,
+        t: usize,
+        color: &[[f32; 4]; N],
+        depth: &[f32; N],
+        motion: &[[f32; 2]; N],
+        mask: u32,
+    ) {
+        let k = t - self.first;
+        self.color[k..k + N].copy_from_slice(color);
+        self.depth[k..k + N].copy_from_slice(depth);
+        self.motion[k..k + N].copy_from_slice(motion);
+        self.mask[k..k + N].fill(mask);
+    }
+
     /// Sets pixel `t` (of the frame, in [`Rows::pixels`]).
     #[inline]
     pub fn set(&mut self, t: usize, p: Pixel) {

@@ -84,28 +84,34 @@ impl Planes {
     }
 }
 
-/// `resample::catmull_rom` of every lane's fraction, tap by tap.
+/// `resample::catmull_rom` of every lane's fraction, tap by tap, in its
+/// order of operations.
 #[inline(always)]
 fn weights(f: &Lanes) -> [Lanes; 4] {
     let mut w = [[0.0; RUN]; 4];
     for l in 0..RUN {
-        let c = resample::catmull_rom(f[l]);
-        for i in 0..4 {
-            w[i][l] = c[i];
-        }
+        let f = f[l];
+        let f2 = f * f;
+        let f3 = f2 * f;
+        w[0][l] = -0.5 * f3 + f2 - 0.5 * f;
+        w[1][l] = 1.5 * f3 - 2.5 * f2 + 1.0;
+        w[2][l] = -1.5 * f3 + 2.0 * f2 + 0.5 * f;
+        w[3][l] = 0.5 * f3 - 0.5 * f2;
     }
     w
 }
 
-/// SSE2's `minps` of one lane (glam's `Vec4::min`): `b` unless `a < b`.
+/// SSE2's `minps` of one lane (glam's `Vec4::min`, and its `Vec2::min`
+/// component by component): `b` unless `a < b`.
 #[inline(always)]
-fn min(a: f32, b: f32) -> f32 {
+pub fn min(a: f32, b: f32) -> f32 {
     if a < b { a } else { b }
 }
 
-/// SSE2's `maxps` of one lane (glam's `Vec4::max`): `b` unless `a > b`.
+/// SSE2's `maxps` of one lane (glam's `Vec4::max`, and its `Vec2::max`
+/// component by component): `b` unless `a > b`.
 #[inline(always)]
-fn max(a: f32, b: f32) -> f32 {
+pub fn max(a: f32, b: f32) -> f32 {
     if a > b { a } else { b }
 }
 

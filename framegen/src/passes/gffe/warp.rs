@@ -25,7 +25,7 @@ use crate::output::{CRACK, DisplayMap, GpuOutput, Output, Pixel, Rows, WARPED};
 use crate::passes::common::camera::{Columns, PassCamera, cell};
 use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 use crate::passes::common::resample::{self, Resample, Source};
-use crate::passes::common::resample_run::{self, Planes, RUN};
+use crate::passes::common::resample_run::{self, Planes, RUN, max, min};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 
 /// CPU reference of `warp_project`: one candidate per source pixel.
@@ -179,12 +179,7 @@ impl<F: Fn(usize) -> Vec2> Resolver<'_, F> {
     /// Where target pixel `t`, won by `i`, takes its colour from.
     #[inline(always)]
     fn at(&self, t: usize, i: usize) -> Vec2 {
-        self.at_centers(i, self.target.center(t), self.image.center(i))
-    }
-
-    /// [`Resolver::at`] given the centres of the target pixel and of `i`.
-    #[inline(always)]
-    fn at_centers(&self, i: usize, center: Vec2, own: Vec2) -> Vec2 {
+        let (own, center) = (self.image.center(i), self.target.center(t));
         resample::position(
             own,
             || (self.landing)(i),
@@ -222,6 +217,7 @@ impl<F: Fn(usize) -> Vec2> Resolver<'_, F> {
     /// Target pixels `t .. t + RUN` (in one row): at once where their
     /// winners are consecutive source pixels of one row and the run's
     /// filter takes them, else one by one.
+    #[allow(clippy::needless_range_loop)] // lane loops, as in `resample_run.rs`
     #[inline(always)]
     fn run(&self, rows: &mut Rows<'_>, t: usize, planes: &Planes) {
         let source_width = self.source.size.0;
@@ -242,20 +238,49 @@ impl<F: Fn(usize) -> Vec2> Resolver<'_, F> {
         // The centres of the run's pixels and of their winners are those of
         // its first ones moved by whole pixels (exact: half-integers).
         let (center, own) = (self.target.center(t), self.image.center(first));
-        let mut at = [Vec2::ZERO; RUN];
-        for (l, at) in at.iter_mut().enumerate() {
-            let step = Vec2::new(l as f32, 0.0);
-            *at = self.at_centers(first + l, center + step, own + step);
-        }
         let filter = self.how.filter;
+        // `resample::position` and the motion of `set`, lane by lane in
+        // their order of operations (glam's `Vec2` takes them component
+        // by component).
+        let (mut x, mut y) = ([0.0f32; RUN], [own.y; RUN]);
+        for l in 0..RUN {
+            x[l] = own.x + l as f32;
+        }
+        if filter != Resample::Nearest {
+            let (mut lx, mut ly) = ([0.0f32; RUN], [0.0f32; RUN]);
+            for l in 0..RUN {
+                let p = (self.landing)(first + l);
+                (lx[l], ly[l]) = (p.x, p.y);
+            }
+            let k = self.per_pixel;
+            for l in 0..RUN {
+                let dx = (center.x + l as f32 - lx[l]) * k.x;
+                let dy = (center.y - ly[l]) * k.y;
+                x[l] += min(max(dx, -0.5), 0.5);
+                y[l] += min(max(dy, -0.5), 0.5);
+            }
+        }
+        let at: [Vec2; RUN] = std::array::from_fn(|l| Vec2::new(x[l], y[l]));
         let colors = resample_run::run(self.source, planes, first, &at, filter);
+        let mut color = [[0.0f32; 4]; RUN];
+        let mut depth = [0.0f32; RUN];
+        let mut motion = [[0.0f32; 2]; RUN];
+        let map = self.how.map;
         for l in 0..RUN {
             let c = match &colors {
                 Some(c) => c[l],
                 None => resample::resample(self.source, first + l, at[l], filter),
             };
-            self.set(rows, t + l, at[l], c);
+            color[l] = [c[0], c[1], c[2], 1.0];
+            depth[l] = self.winners.depth(t + l).unwrap_or(f32::INFINITY);
         }
+        for l in 0..RUN {
+            motion[l] = [
+                (x[l] - map.offset.x) * map.scale.x - (center.x + l as f32),
+                (y[l] - map.offset.y) * map.scale.y - center.y,
+            ];
+        }
+        rows.set_run(t, &color, &depth, &motion, WARPED);
     }
 
     /// Every pixel of a band of rows.
@@ -487,7 +512,7 @@ mod tests {
     /// one by one, bit for bit, on the build's instructions and on AVX2:
     /// a textured image with flat patches, highlights, edges between
     /// surfaces, sky and points with no surface, warped by a smooth
-    /// sub-pixel pan and zoom (most runs taken at once), with a filter
+    /// sub-pixel pan and zoom (most runs taken at once), with the filters
     /// the runs do not take and with a source that is not opaque.
     #[test]
     fn runs_resolve_as_pixels_one_by_one() {
@@ -555,6 +580,7 @@ mod tests {
         for (filter, opaque) in [
             (Resample::CatmullRom, true),
             (Resample::Bilinear, true),
+            (Resample::Nearest, true),
             (Resample::CatmullRom, false),
         ] {
             let mut color = color.clone();
