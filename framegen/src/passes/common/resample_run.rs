@@ -84,19 +84,15 @@ impl Planes {
     }
 }
 
-/// `resample::catmull_rom` of every lane's fraction, tap by tap, in its
-/// order of operations.
+/// `resample::catmull_rom` of every lane's fraction, tap by tap.
 #[inline(always)]
 fn weights(f: &Lanes) -> [Lanes; 4] {
     let mut w = [[0.0; RUN]; 4];
     for l in 0..RUN {
-        let f = f[l];
-        let f2 = f * f;
-        let f3 = f2 * f;
-        w[0][l] = -0.5 * f3 + f2 - 0.5 * f;
-        w[1][l] = 1.5 * f3 - 2.5 * f2 + 1.0;
-        w[2][l] = -1.5 * f3 + 2.0 * f2 + 0.5 * f;
-        w[3][l] = 0.5 * f3 - 0.5 * f2;
+        let c = resample::catmull_rom(f[l]);
+        for i in 0..4 {
+            w[i][l] = c[i];
+        }
     }
     w
 }
