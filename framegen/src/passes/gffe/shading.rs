@@ -61,6 +61,7 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
+use crate::passes::common::camera::cell;
 use crate::passes::common::resample::same_surface;
 use crate::passes::gffe::history::is_dynamic;
 
@@ -185,12 +186,11 @@ pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_
     }
     let m = cur.motion[x];
     let p = Vec2::new(px as f32 + 0.5 + m[0], py as f32 + 0.5 + m[1]);
-    // NaN-safe: a position outside (or not a number) has no aligned pixel.
-    if !(p.x >= 0.0 && p.x < w as f32 && p.y >= 0.0 && p.y < h as f32) {
+    // A position outside (or not a number) has no aligned pixel.
+    let Some(near) = cell(p, w, h, 1.0) else {
         return [0.0; 2];
-    }
-    let (cx, cy) = (p.x as i32, p.y as i32);
-    let near = cy as usize * w as usize + cx as usize;
+    };
+    let near = near as usize;
     let aligned = prev.ratio.get(near).map_or(0.0, |r| r[0]);
     let luma_at = |s: usize| match prev.luma.get(s) {
         Some(&l) => l,
@@ -472,11 +472,7 @@ pub fn lender(flow: &[[f32; 4]], size: (u32, u32), bx: i32, by: i32) -> Option<[
 #[inline]
 fn ratio_nearest(ratio: &[[f32; 2]], size: (u32, u32), sx: f32, sy: f32) -> f32 {
     let (w, h) = size;
-    if sx >= 0.0 && sx < w as f32 && sy >= 0.0 && sy < h as f32 {
-        ratio[(sy as u32 * w + sx as u32) as usize][0]
-    } else {
-        0.0
-    }
+    cell(Vec2::new(sx, sy), w, h, 1.0).map_or(0.0, |s| ratio[s as usize][0])
 }
 
 /// `r_t` bilinearly at the continuous position `(x, y)` (pixel centres at
