@@ -224,14 +224,26 @@ pub fn cell(px: Vec2, w: u32, h: u32, scale: f32) -> Option<u32> {
     if !(q.x >= 0.0 && q.y >= 0.0 && q.x < w as f32 && q.y < h as f32) {
         return None;
     }
-    // SAFETY: both are checked above to be numbers in `0 .. w` and `0 .. h`
-    // (`w as f32` is at most 2³², so a quotient below it fits a `u32`).
-    // Unchecked, the casts leave out the saturation `as` adds for values
-    // outside that range: this is asked per pixel or fragment by the
-    // history, the background, the warp's splat and shading correction,
-    // and the checks were 3–4 % of a generated frame's time at 720p.
+    // SAFETY: checked just above.
+    Some(unsafe { cell_inside(q, w) })
+}
+
+/// [`cell`] at scale 1 of a position `q` known to be on the grid.
+///
+/// Its casts are unchecked: they leave out the saturation `as` adds for
+/// values outside a `u32`'s range. This is asked per pixel or fragment by
+/// the history, the background, the warp's splat and shading correction,
+/// and the saturation was 3–4 % of a generated frame's time at 720p.
+///
+/// # Safety
+///
+/// `q.x` and `q.y` are numbers in `0 .. w as f32` and `0 .. h as f32` for
+/// the grid's height `h` (`w as f32` is at most 2³², so they fit a `u32`).
+#[inline]
+pub unsafe fn cell_inside(q: Vec2, w: u32) -> u32 {
+    // SAFETY: the caller's promise.
     let (x, y) = unsafe { (q.x.to_int_unchecked::<u32>(), q.y.to_int_unchecked::<u32>()) };
-    Some(y * w + x)
+    y * w + x
 }
 
 /// Moves a stored position from one reference origin to another: `shift` is

@@ -12,7 +12,7 @@
 
 use glam::{BVec4A, Mat4, Vec2, Vec4};
 
-use crate::passes::common::camera::{PassCamera, cell};
+use crate::passes::common::camera::{PassCamera, cell_inside};
 
 /// Pixels at a time.
 pub const LANES: usize = 4;
@@ -157,23 +157,71 @@ pub fn project4(cam: &PassCamera, p: Lanes3, w: Vec4) -> Projected4 {
     }
 }
 
-/// [`cell`] of each lane of `r` that projects, on a `w × h` grid of
-/// `scale`-pixel cells: the division in lanes, the bounds one by one.
+/// [`cell`](crate::passes::common::camera::cell) of each lane of `r` that
+/// projects, on a `w × h` grid of `scale`-pixel cells: the division in
+/// lanes, then [`cells`].
 #[inline]
 pub fn cells4(r: &Projected4, w: u32, h: u32, scale: f32) -> [Option<u32>; LANES] {
-    let (x, y) = (r.x / scale, r.y / scale);
-    let valid = r.valid.bitmask();
+    cells(r.x / scale, r.y / scale, r.valid, w, h)
+}
+
+/// [`cell`](crate::passes::common::camera::cell) at scale 1 of the
+/// positions `(x, y)` in the lanes of `valid` (`None` in the others): the
+/// bounds tested in lanes, the index made one by one.
+#[inline]
+pub fn cells(x: Vec4, y: Vec4, valid: BVec4A, w: u32, h: u32) -> [Option<u32>; LANES] {
+    // `cell`'s test, lane by lane (NaN fails every comparison).
+    let inside = valid
+        & x.cmpge(Vec4::ZERO)
+        & y.cmpge(Vec4::ZERO)
+        & x.cmplt(Vec4::splat(w as f32))
+        & y.cmplt(Vec4::splat(h as f32));
+    let inside = inside.bitmask();
     std::array::from_fn(|l| {
-        // `cell` of the quotient at scale 1 (dividing by 1 is exact).
-        (valid & (1 << l) != 0)
-            .then(|| cell(Vec2::new(x[l], y[l]), w, h, 1.0))
-            .flatten()
+        // SAFETY: the lane passed `cell`'s test above.
+        (inside & (1 << l) != 0).then(|| unsafe { cell_inside(Vec2::new(x[l], y[l]), w) })
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::passes::common::camera::cell;
+
+    /// `cells` is `cell` lane by lane, for positions on, beside and off
+    /// the grid, not numbers and infinite, in lanes valid or not.
+    #[test]
+    fn cells_are_cell_lane_by_lane() {
+        let values = [
+            0.0,
+            -0.0,
+            -1e-30,
+            0.5,
+            6.999_999_5,
+            7.0,
+            2.999_999_8,
+            3.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -3.5,
+            1e30,
+        ];
+        let mut found = [0usize; 2];
+        for i in 0..values.len().pow(2) * 4 {
+            let v = |j: usize| values[(i * 5 + j * 7 + i / 9) % values.len()];
+            let (x, y) = ([v(0), v(1), v(2), v(3)], [v(4), v(5), v(6), v(7)]);
+            let valid = BVec4A::new(i % 3 != 0, true, i % 5 != 1, true);
+            let lanes = cells(Vec4::from(x), Vec4::from(y), valid, 7, 3);
+            for l in 0..LANES {
+                let one = cell(Vec2::new(x[l], y[l]), 7, 3, 1.0);
+                let valid = valid.bitmask() & (1 << l) != 0;
+                assert_eq!(lanes[l], one.filter(|_| valid), "{} {}", x[l], y[l]);
+                found[usize::from(lanes[l].is_some())] += 1;
+            }
+        }
+        assert!(found.iter().all(|&n| n > 50), "{found:?}");
+    }
 
     /// Lanes agree with the scalar camera bit for bit, over points,
     /// directions, nothing, NaN, points behind the camera and far off.

@@ -36,11 +36,11 @@
 //! Positions are stored relative to the current camera centre; the previous
 //! history is rebased by the previous camera's centre (computed in `f64`).
 
-use glam::{Vec2, Vec4};
+use glam::{BVec4A, Vec2, Vec4};
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::{PassCamera, W_DIRECTION, W_INVALID, W_POINT, cell, rebase};
-use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
+use crate::passes::common::lanes::{LANES, Lanes3, cells, cells4, project4};
 
 /// The previous rendered frame's history, as the current frame sees it.
 #[derive(Clone, Copy, Debug)]
@@ -305,8 +305,7 @@ impl Tracker<'_> {
     ) -> [bool; LANES] {
         let cam = self.camera;
         let (pw, ph) = (prev.camera.width(), prev.camera.height());
-        let found: [Option<u32>; LANES] =
-            std::array::from_fn(|l| cell(Vec2::new(tx[l], ty[l]), pw, ph, 1.0));
+        let found = cells(tx, ty, BVec4A::splat(true), pw, ph);
         // Each previous position, or the pixel's own where its target is off
         // the previous image (projected, never confirmed).
         let q: [[f32; 4]; LANES] = std::array::from_fn(|l| match found[l] {
