@@ -62,7 +62,7 @@ use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::cell;
-use crate::passes::common::resample::same_surface;
+use crate::passes::common::resample::{floor, same_surface};
 use crate::passes::gffe::history::is_dynamic;
 
 /// Added to luminances before their ratio, so black against black is no
@@ -123,15 +123,6 @@ pub const QUANTUM: f32 = 1.0 / 256.0;
 #[inline]
 pub fn quantize(v: f32) -> f32 {
     floor(v / QUANTUM + 0.5) as f32 * QUANTUM
-}
-
-/// `v.floor()` for `v` within `i32`'s range, by a cast (what this pass
-/// asks of it per pixel; `floorf` is a call on this target and cost a
-/// tenth of the estimate). NaN gives 0.
-#[inline]
-fn floor(v: f32) -> i32 {
-    let t = v as i32;
-    t - i32::from(t as f32 > v)
 }
 
 /// Rec. 709 luminance of linear RGB, negatives as 0.
