@@ -158,7 +158,8 @@ pub fn run(
         // comparisons that a NaN fails, without a conversion per lane (the
         // saturating floors cost the warp 5 % of its time at 720p).
         let x = x0 + l as f32;
-        shifted |= !(q.x >= x) | !(q.x < x + 1.0) | !(q.y >= y0) | !(q.y < y0 + 1.0);
+        let inside = (q.x >= x) & (q.x < x + 1.0) & (q.y >= y0) & (q.y < y0 + 1.0);
+        shifted |= !inside;
         fx[l] = q.x - x;
         fy[l] = q.y - y0;
     }
