@@ -88,6 +88,15 @@ fn project(cam: Cam, p: vec4<f32>) -> Proj {
     return out;
 }
 
+// Linear view depth of a stored position (`camera.rs` `depth_of`): +inf for
+// a direction (the caller rejects invalid slots).
+fn depth_of(cam: Cam, p: vec4<f32>) -> f32 {
+    if p.w < 0.5 {
+        return inf_f32();
+    }
+    return -dot(cam.col2.xyz, p.xyz - cam.eye.xyz);
+}
+
 // Linear index of the pixel containing continuous position `px` in a
 // `w` x `h` grid scaled down by `scale`, or NONE outside.
 fn cell(px: vec2<f32>, w: u32, h: u32, scale: f32) -> u32 {

@@ -43,13 +43,6 @@ fn rebased(p: vec4<f32>) -> vec4<f32> {
     return p;
 }
 
-fn slot_depth(p: vec4<f32>) -> f32 {
-    if p.w < 0.5 {
-        return inf_f32();
-    }
-    return -dot(bp.camera.col2.xyz, p.xyz - bp.camera.eye.xyz);
-}
-
 @compute @workgroup_size(256)
 fn bg_project(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = thread_index(wid, nwg, lid);
@@ -67,7 +60,7 @@ fn bg_project(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
                 let here = bg[bp.level.x + s];
                 if here.color.w <= 0.5 {
                     out = vec2<u32>(bp.level.x + s, depth_key(r.depth));
-                } else if bp.next.w == 1u && r.depth > slot_depth(here.pos) * (1.0 + bp.shift.w) {
+                } else if bp.next.w == 1u && r.depth > depth_of(bp.camera, here.pos) * (1.0 + bp.shift.w) {
                     let s1 = cell(r.pixel, bp.next.y, bp.next.z, f32(1u << (l + 1u)));
                     if s1 != NONE {
                         out = vec2<u32>(bp.next.x + s1, depth_key(r.depth));

@@ -48,25 +48,23 @@ fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         let eps = hp.epsilon.x;
         is_static = r.ok && e.x * e.x + e.y * e.y <= eps * eps;
         let j = cell(target_px, hp.sizes.z, hp.sizes.w, 1.0);
-        // A negative tolerance: no background, nothing to confirm.
-        if is_static && j != NONE && hp.epsilon.y >= 0.0 {
-            var q = prev_positions[j];
+        // Confirmed where the point lands in the previous frame; a
+        // negative tolerance: no background, nothing to confirm.
+        let seen = cell(r.pixel, hp.sizes.z, hp.sizes.w, 1.0);
+        if is_static && seen != NONE && hp.epsilon.y >= 0.0 {
+            var q = prev_positions[seen];
             if q.w > 0.5 {
                 q = vec4<f32>(q.xyz + hp.prev.eye.xyz, q.w);
             }
+            // The pixel's point, seen from the previous camera (`r`), is as
+            // deep as the previous frame's point there.
             var agrees = false;
             if q.w == p.w {
                 if q.w == W_DIRECTION {
                     agrees = true;
                 } else {
-                    let rq = project(hp.cur, q);
-                    if rq.ok {
-                        let y = cell(rq.pixel, w, hp.sizes.y, 1.0);
-                        if y != NONE {
-                            let dy = depth[y];
-                            agrees = abs(rq.depth - dy) <= hp.epsilon.y * dy;
-                        }
-                    }
+                    let dq = depth_of(hp.prev, q);
+                    agrees = abs(r.depth - dq) <= hp.epsilon.y * dq;
                 }
             }
             if agrees {
