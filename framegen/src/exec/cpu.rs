@@ -514,7 +514,9 @@ impl Executor for CpuBackend {
             let track = &cur.history.track;
             let seeded = |i: usize| track.get(i).is_some_and(|&t| background::seeds(t));
             let layout = bgfill::Layout::new(cur.levels, job.bg_target);
-            let winners = splat::resolve_with(bg.len(), slots, |i| {
+            // Most fragments are seeds or empty: only those that land
+            // are splatted.
+            let winners = splat::resolve_sparse(bg.len(), slots, |i| {
                 if seeded(i) {
                     return splat::Candidate::MISS;
                 }

@@ -138,6 +138,87 @@ pub fn resolve_with(
     })
 }
 
+/// [`resolve_with`] for candidates that mostly land nowhere (background
+/// fill, where most fragments are seeds or empty): those that land are
+/// collected first, on all cores, and only they are taken, so the misses
+/// cost no splat (720p background fill 2.45 -> 1.67 ms). Where most land,
+/// the list costs more than it saves: [`resolve_with`] there. The same
+/// winners.
+pub fn resolve_sparse(
+    count: usize,
+    range: std::ops::Range<usize>,
+    candidate: impl Fn(usize) -> Candidate + Sync + Send,
+) -> Winners {
+    use rayon::prelude::*;
+    let landed: Vec<(usize, Candidate)> = (0..count)
+        .into_par_iter()
+        .with_min_len(4096)
+        .filter_map(|i| Some((i, candidate(i))).filter(|(_, c)| c.slot != NONE))
+        .collect();
+    let slots = Slots::new(range);
+    landed.par_iter().for_each(|&(i, c)| slots.take(i, c));
+    slots.winners()
+}
+
+/// The packed words of a range of slots as the atomic maximum of each
+/// builds them ([`resolve_lanes`], [`resolve_sparse`]).
+struct Slots {
+    range: std::ops::Range<usize>,
+    packed: Vec<std::sync::atomic::AtomicU64>,
+}
+
+impl Slots {
+    /// Every slot of `range` empty, cleared on all cores.
+    fn new(range: std::ops::Range<usize>) -> Self {
+        use rayon::prelude::*;
+        let packed = range
+            .clone()
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|_| std::sync::atomic::AtomicU64::new(0))
+            .collect();
+        Self { range, packed }
+    }
+
+    /// Candidate `i`'s word, `key << 32 | !i`: the largest is the nearest,
+    /// then the smallest index.
+    #[inline]
+    fn value(i: usize, c: Candidate) -> u64 {
+        (u64::from(c.key) << 32) | u64::from(!(i as u32))
+    }
+
+    /// Index of the slot `c` lands in, if it is in the range.
+    #[inline]
+    fn index(&self, c: Candidate) -> Option<usize> {
+        (c.slot as usize)
+            .checked_sub(self.range.start)
+            .filter(|&s| s < self.packed.len())
+    }
+
+    /// Candidate `i` taken into its slot with the atomic maximum (no write
+    /// where it cannot win, most of them where surfaces overlap).
+    #[inline]
+    fn take(&self, i: usize, c: Candidate) {
+        use std::sync::atomic::Ordering::Relaxed;
+        if let Some(slot) = self.index(c).map(|s| &self.packed[s]) {
+            let v = Self::value(i, c);
+            if v > slot.load(Relaxed) {
+                slot.fetch_max(v, Relaxed);
+            }
+        }
+    }
+
+    /// The winners, in place (same layout), without a second frame-sized
+    /// allocation.
+    fn winners(self) -> Winners {
+        let packed = self.packed.into_iter().map(|v| v.into_inner()).collect();
+        Winners {
+            base: self.range.start,
+            packed,
+        }
+    }
+}
+
 /// [`resolve_with`] with the candidates made [`LANES`] at a time:
 /// `candidates(i)` gives those of elements `i .. i + LANES` (`i` a multiple
 /// of `LANES`), for a pass that projects four at once (`lanes.rs`); those
@@ -148,15 +229,9 @@ pub fn resolve_lanes(
     candidates: impl Fn(usize) -> [Candidate; LANES] + Sync,
 ) -> Winners {
     use rayon::prelude::*;
-    use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
-    let packed: Vec<AtomicU64> = range
-        .clone()
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|_| AtomicU64::new(0))
-        .collect();
-    let value = |i: usize, c: Candidate| (u64::from(c.key) << 32) | u64::from(!(i as u32));
-    let slot_of = |c: Candidate| (c.slot as usize).checked_sub(range.start);
+    use std::sync::atomic::Ordering::Relaxed;
+    let slots = Slots::new(range);
+    let packed = &slots.packed;
     if count == packed.len() && count >= 2 * MIN_BAND {
         // One candidate per slot, most landing near their own index (a
         // warp of a frame into a frame of its size): each band of
@@ -166,19 +241,19 @@ pub fn resolve_lanes(
         // with the atomic maximum. The same maxima.
         let bands = 4 * rayon::current_num_threads();
         let band = count.div_ceil(bands).max(MIN_BAND).next_multiple_of(LANES);
-        let elsewhere: Vec<Vec<(usize, u64)>> = (0..count.div_ceil(band))
+        let elsewhere: Vec<Vec<(usize, Candidate)>> = (0..count.div_ceil(band))
             .into_par_iter()
             .map(|b| {
                 let own = b * band..((b + 1) * band).min(count);
                 let mut elsewhere = Vec::new();
                 for first in own.clone().step_by(LANES) {
                     for (i, c) in (first..count).zip(candidates(first)) {
-                        let Some(s) = slot_of(c).filter(|&s| s < packed.len()) else {
+                        let Some(s) = slots.index(c) else {
                             continue;
                         };
-                        let v = value(i, c);
+                        let v = Slots::value(i, c);
                         if !own.contains(&s) {
-                            elsewhere.push((s, v));
+                            elsewhere.push((i, c));
                         } else if v > packed[s].load(Relaxed) {
                             packed[s].store(v, Relaxed);
                         }
@@ -188,10 +263,8 @@ pub fn resolve_lanes(
             })
             .collect();
         elsewhere.par_iter().for_each(|landed| {
-            for &(s, v) in landed {
-                if v > packed[s].load(Relaxed) {
-                    packed[s].fetch_max(v, Relaxed);
-                }
+            for &(i, c) in landed {
+                slots.take(i, c);
             }
         });
     } else {
@@ -202,21 +275,11 @@ pub fn resolve_lanes(
             .for_each(|g| {
                 let first = g * LANES;
                 for (i, c) in (first..count).zip(candidates(first)) {
-                    if let Some(slot) = slot_of(c).and_then(|s| packed.get(s)) {
-                        let v = value(i, c);
-                        if v > slot.load(Relaxed) {
-                            slot.fetch_max(v, Relaxed);
-                        }
-                    }
+                    slots.take(i, c);
                 }
             });
     }
-    // In place (same layout), without a second frame-sized allocation.
-    let packed = packed.into_iter().map(AtomicU64::into_inner).collect();
-    Winners {
-        base: range.start,
-        packed,
-    }
+    slots.winners()
 }
 
 /// Parameters of the splat kernels.
@@ -350,5 +413,38 @@ mod tests {
             assert_eq!(banded.get(s), e, "slot {s}");
         }
         assert!(expected.iter().filter(|&&e| e != 0).count() > n / 2);
+    }
+
+    /// The sparse splat finds what the dense one finds: over candidates
+    /// that mostly miss, land outside the range, tie, and land in the
+    /// same slots from far apart.
+    #[test]
+    fn the_sparse_splat_finds_what_the_dense_one_finds() {
+        let n = 50_000;
+        let candidate = |i: usize| match i % 29 {
+            0 => Candidate {
+                slot: (i % 97) as u32 + 100,
+                key: depth_key([1.0, 2.0][i % 2]),
+            },
+            1 => Candidate {
+                slot: 10_000,
+                key: depth_key(3.0),
+            },
+            2 => Candidate {
+                slot: (i % 50) as u32,
+                key: depth_key(1.0),
+            },
+            _ => Candidate::MISS,
+        };
+        let range = 90..260;
+        let dense = resolve_with(n, range.clone(), candidate);
+        let sparse = resolve_sparse(n, range.clone(), candidate);
+        assert_eq!(sparse, dense);
+        assert!(
+            (range.start..range.end)
+                .filter(|&s| dense.winner(s).is_some())
+                .count()
+                > 90
+        );
     }
 }
