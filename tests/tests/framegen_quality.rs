@@ -228,6 +228,39 @@ fn interp_beats_repeat_and_on_disocclusion_reproject() {
     }
 }
 
+/// The CPU executor writes shading correction's changes into the rendered
+/// frame's colour for the warp and puts them back after it: a generated
+/// frame made again after others at other α has the same bits, and the
+/// correction did change it (against gffe without it).
+#[test]
+fn shading_correction_leaves_the_rendered_colour_as_it_was() {
+    let frames = recorded_sharp(Scene::load("builtin:moving_light").unwrap(), 30, 6);
+    let shaded = Settings::for_method(Method::Gffe);
+    let generator = |settings| {
+        let mut g = FrameGenerator::cpu(settings).unwrap();
+        for f in &frames {
+            g.push(f).unwrap();
+        }
+        g
+    };
+    let bits = |g: &mut FrameGenerator, alpha| {
+        let out = g.generate(alpha).unwrap();
+        let color = out.frame.color.iter().flatten();
+        color.map(|h| h.to_bits()).collect::<Vec<_>>()
+    };
+    let mut g = generator(shaded);
+    let first = bits(&mut g, 0.5);
+    for alpha in [1.0, 0.25, 2.0] {
+        bits(&mut g, alpha);
+    }
+    assert!(bits(&mut g, 0.5) == first, "the colour was not put back");
+    let without = Settings {
+        shading: false,
+        ..shaded
+    };
+    assert!(bits(&mut generator(without), 0.5) != first);
+}
+
 /// Shading correction (GFFE §4.4, `passes/gffe/shading.rs`) moves the
 /// shading a geometry-aware warp leaves behind: on `moving_light` (a spot
 /// light orbiting static blocks) gffe with it beats gffe without it, on

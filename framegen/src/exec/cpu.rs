@@ -85,11 +85,11 @@ pub struct CpuBackend {
     /// The warped colour as planes of one channel, for the resampling
     /// filter's runs (`resample_run.rs`); kept from frame to frame.
     planes: Planes,
-    /// The shading-corrected colour of the generated frame being made,
-    /// which its warp moves instead of the rendered colour.
-    shaded: Option<Vec<[f32; 4]>>,
-    /// `shaded`'s allocation between generated frames.
-    shaded_buffer: Vec<[f32; 4]>,
+    /// The pixels shading correction changed in the current frame's colour
+    /// for the warp of the generated frame being made, with the colours
+    /// they had: put back after the warp ([`CpuBackend::restore`]), so
+    /// the colour is the rendered one again for the next generated frame.
+    undo: Vec<(u32, [f32; 4])>,
     /// Push-pull's maps of the texels it made, kept between frames.
     holes: pushpull::Scratch,
 }
@@ -127,6 +127,7 @@ impl Backend for CpuBackend {
     }
 
     fn reset(&mut self) {
+        self.restore();
         self.current = None;
         self.previous = None;
     }
@@ -183,6 +184,17 @@ impl CpuBackend {
         Ok((cur, &mut self.out, &mut self.timings))
     }
 
+    /// Puts back the colours shading correction changed in the current
+    /// frame (its warp has moved them, or it did not run).
+    fn restore(&mut self) {
+        if let Some(cur) = self.current.as_mut() {
+            for (i, c) in self.undo.drain(..) {
+                cur.color[i as usize] = c;
+            }
+        }
+        self.undo.clear();
+    }
+
     /// The output a previous pass of the plan made.
     fn output(out: &mut Option<Output>) -> Result<&mut Output, FramegenError> {
         out.as_mut().ok_or(FramegenError::PassOrder(
@@ -193,6 +205,7 @@ impl CpuBackend {
 
 impl Executor for CpuBackend {
     fn upload(&mut self, frame: &Arc<Prepared>, plan: &IngestPlan) -> Result<(), FramegenError> {
+        self.restore();
         self.timings.clear();
         let prev = match plan.prev {
             Some(camera) => self.current.take().map(|p| (camera, p)),
@@ -349,9 +362,7 @@ impl Executor for CpuBackend {
             .retain(|p| matches!(p.pass, Pass::History | Pass::Background | Pass::Shading));
         self.out = None;
         self.copied = None;
-        if let Some(buffer) = self.shaded.take() {
-            self.shaded_buffer = buffer;
-        }
+        self.restore();
         Ok(())
     }
 
@@ -384,13 +395,14 @@ impl Executor for CpuBackend {
     }
 
     fn shade(&mut self, job: &Job) -> Result<(), FramegenError> {
-        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        self.restore();
+        let cur = self.current.as_mut().ok_or(FramegenError::NoFrame)?;
         if cur.ratio.is_empty() {
             // No estimate (first frame, gap): the rendered colour as it is.
             return Ok(());
         }
-        let mut shaded = std::mem::take(&mut self.shaded_buffer);
-        let changed = timed(&mut self.timings, Pass::Shade, || {
+        let undo = &mut self.undo;
+        timed(&mut self.timings, Pass::Shade, || {
             let e = shading::Estimate {
                 color: &cur.color,
                 track: &cur.history.track,
@@ -398,14 +410,12 @@ impl Executor for CpuBackend {
                 flow: &cur.flow,
                 size: (cur.camera.width(), cur.camera.height()),
             };
-            shading::correct_into(&e, job.alpha, &mut shaded)
+            // Nothing to continue: the warp moves the rendered colour.
+            let changes = shading::changes(&e, job.alpha).unwrap_or_default();
+            for (i, c) in changes {
+                undo.push((i, std::mem::replace(&mut cur.color[i as usize], c)));
+            }
         });
-        // Nothing to continue: the warp moves the rendered colour.
-        if changed {
-            self.shaded = Some(shaded);
-        } else {
-            self.shaded_buffer = shaded;
-        }
         Ok(())
     }
 
@@ -431,7 +441,6 @@ impl Executor for CpuBackend {
             .ok_or(FramegenError::PassOrder("warp() before motion()"))?;
         let landings = &mut self.landings;
         let planes = &mut self.planes;
-        let shaded = self.shaded.take();
         let out = timed(&mut self.timings, Pass::Warp, || {
             let (w, h) = (job.target.width(), job.target.height());
             let (positions, track) = (&cur.history.positions, &cur.history.track);
@@ -467,7 +476,8 @@ impl Executor for CpuBackend {
             });
             let f = &cur.frame;
             let source = Source {
-                color: shaded.as_deref().unwrap_or(&cur.color),
+                // Shading-corrected where `shade` changed it.
+                color: &cur.color,
                 depth: &f.depth,
                 size: (cur.camera.width(), cur.camera.height()),
             };
@@ -495,9 +505,7 @@ impl Executor for CpuBackend {
             warp::close_cracks(&mut out);
             out
         });
-        if let Some(buffer) = shaded {
-            self.shaded_buffer = buffer;
-        }
+        self.restore();
         self.out = Some(out);
         Ok(())
     }

@@ -585,34 +585,52 @@ fn apply(c: [f32; 4], predicted: f32) -> [f32; 4] {
 /// (and leaves `out` as it was) when no block has a change to continue:
 /// the colour is then the rendered one as it is.
 pub fn correct_into(e: &Estimate<'_>, alpha: f32, out: &mut Vec<[f32; 4]>) -> bool {
+    let Some(changes) = changes(e, alpha) else {
+        return false;
+    };
+    out.clear();
+    out.extend_from_slice(e.color);
+    for (i, c) in changes {
+        out[i as usize] = c;
+    }
+    true
+}
+
+/// Steps 3–4 as the pixels they change: each with its corrected colour,
+/// in no particular order; `None` when no block has a change to continue.
+/// Only the pixels of blocks with a lender are visited (a tenth of a 720p
+/// frame of the default scene, of which a tenth change): the CPU executor
+/// writes these into the frame's colour for the warp and takes them back
+/// after it, instead of copying the whole frame ([`correct_into`]).
+pub fn changes(e: &Estimate<'_>, alpha: f32) -> Option<Vec<(u32, [f32; 4])>> {
     use rayon::prelude::*;
     let (w, h) = e.size;
     let (bw, bh) = blocks(w, h);
-    let lenders: Vec<Option<[f32; 4]>> = (0..bw * bh)
-        .map(|b| lender(e.flow, e.size, (b % bw) as i32, (b / bw) as i32))
+    let lenders: Vec<(u32, [f32; 4])> = (0..bw * bh)
+        .filter_map(|b| lender(e.flow, e.size, (b % bw) as i32, (b / bw) as i32).map(|f| (b, f)))
         .collect();
-    if lenders.iter().all(Option::is_none) {
-        return false;
+    if lenders.is_empty() {
+        return None;
     }
-    out.resize(e.color.len(), [0.0; 4]);
-    out.par_chunks_mut(w as usize)
-        .enumerate()
-        .for_each(|(py, row)| {
-            let py = py as u32;
-            let base = (py * w) as usize;
-            let colors = &e.color[base..base + w as usize];
-            let tracks = &e.track[base..base + w as usize];
-            for (px, ((o, &c), &t)) in row.iter_mut().zip(colors).zip(tracks).enumerate() {
-                let px = px as u32;
-                *o = match lenders[((py / BLOCK) * bw + px / BLOCK) as usize] {
-                    Some(f) if !is_dynamic(t) => {
-                        apply(c, predict(e.ratio, e.size, px, py, [f[0], f[1]], alpha))
+    let changed = lenders
+        .par_iter()
+        .flat_map_iter(|&(b, f)| {
+            let (x0, y0) = ((b % bw) * BLOCK, (b / bw) * BLOCK);
+            let (x1, y1) = ((x0 + BLOCK).min(w), (y0 + BLOCK).min(h));
+            (y0..y1)
+                .flat_map(move |py| (x0..x1).map(move |px| (px, py)))
+                .filter_map(move |(px, py)| {
+                    let i = py * w + px;
+                    let (c, t) = (e.color[i as usize], e.track[i as usize]);
+                    if is_dynamic(t) {
+                        return None;
                     }
-                    _ => c,
-                };
-            }
-        });
-    true
+                    let o = apply(c, predict(e.ratio, e.size, px, py, [f[0], f[1]], alpha));
+                    (o.map(f32::to_bits) != c.map(f32::to_bits)).then_some((i, o))
+                })
+        })
+        .collect();
+    Some(changed)
 }
 
 #[repr(C)]
