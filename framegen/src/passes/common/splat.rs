@@ -141,7 +141,7 @@ pub fn resolve_with(
 /// [`resolve_with`] for candidates that mostly land nowhere (background
 /// fill, where most fragments are seeds or empty): those that land are
 /// collected first, on all cores, and only they are taken, so the misses
-/// cost no splat (720p background fill 2.45 -> 1.67 ms). Where most land,
+/// cost no splat (720p background fill 2.45 → 1.67 ms). Where most land,
 /// the list costs more than it saves: [`resolve_with`] there. The same
 /// winners.
 pub fn resolve_sparse(
