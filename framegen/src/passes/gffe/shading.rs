@@ -555,6 +555,11 @@ pub fn predict(
         );
         predicted += if left >= 1.0 {
             whole
+        } else if whole == 0.0 {
+            // Kept between 0 and 0 below, whatever the fraction's change:
+            // its three reads and four bilinear taps are not needed (most
+            // pixels the correction visits).
+            0.0
         } else {
             let (yx, yy) = (cx - (k - 1.0) * f[0], cy - (k - 1.0) * f[1]);
             let part = ratio_bilinear(ratio, size, yx - left * f[0], yy - left * f[1]);
@@ -927,6 +932,23 @@ mod tests {
                 assert!((got - expect).abs() < 1e-5, "f {f:?} α {alpha}: {got}");
             }
         }
+    }
+
+    /// Where the whole interval back along `f` has no change, a fraction
+    /// of an interval has none either, whatever lies around it (the
+    /// fraction is kept between 0 and that change), and the reads for the
+    /// fraction are skipped; an interval and a half reaches the change
+    /// beyond it.
+    #[test]
+    fn no_change_an_interval_back_is_none_for_a_fraction_of_one() {
+        let mut ratio = vec![[0.5f32, 0.5]; (W * H) as usize];
+        ratio[(8 * W + 21) as usize] = [0.0; 2];
+        for alpha in [0.25, 0.5, 0.9] {
+            let got = predict(&ratio, (W, H), 24, 8, [3.0, 0.0], alpha);
+            assert_eq!(got.to_bits(), 0.0f32.to_bits(), "α {alpha}");
+        }
+        let further = predict(&ratio, (W, H), 24, 8, [3.0, 0.0], 1.5);
+        assert!((further - 0.5).abs() < 1e-6, "{further}");
     }
 
     /// The search as first written: every displacement's cost in full,
