@@ -126,6 +126,7 @@ fn recycled_buffers_leave_no_trace() {
         camera: prev_cam,
         positions: &hist_a.positions,
         track: &hist_a.track,
+        depth: &pa.depth,
     };
     let tracker = Tracker {
         camera: &cam_b,

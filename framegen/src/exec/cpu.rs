@@ -249,6 +249,7 @@ impl Executor for CpuBackend {
             camera: *camera,
             positions: &p.history.positions,
             track: &p.history.track,
+            depth: &p.frame.depth,
         });
         let f = &i.state.frame;
         let reuse = match i.spare.as_mut() {

@@ -798,7 +798,7 @@ impl Executor for GpuBackend {
                 &plan.camera,
                 &b.depth,
                 &b.motion,
-                prev.map(|(cam, p)| (cam, p.history())),
+                prev.map(|(cam, p)| (cam, p.history(), &p.depth)),
                 b.history(),
                 &i.dynamic,
                 plan.k,

@@ -16,6 +16,7 @@ struct HistoryParams {
 @group(0) @binding(5) var<storage, read_write> positions: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> track: array<u32>;
 @group(0) @binding(7) var<storage, read_write> dynamic_count: array<atomic<u32>>;
+@group(0) @binding(8) var<storage, read> prev_depth: array<f32>;
 
 @compute @workgroup_size(256)
 fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -52,20 +53,14 @@ fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         // negative tolerance: no background, nothing to confirm.
         let seen = cell(r.pixel, hp.sizes.z, hp.sizes.w, 1.0);
         if is_static && seen != NONE && hp.epsilon.y >= 0.0 {
-            var q = prev_positions[seen];
-            if q.w > 0.5 {
-                q = vec4<f32>(q.xyz + hp.prev.eye.xyz, q.w);
-            }
             // The pixel's point, seen from the previous camera (`r`), is as
-            // deep as the previous frame's point there.
+            // deep as the previous frame's depth there (`agrees`).
+            let before = prev_depth[seen];
             var agrees = false;
-            if q.w == p.w {
-                if q.w == W_DIRECTION {
-                    agrees = true;
-                } else {
-                    let dq = depth_of(hp.prev, q);
-                    agrees = abs(r.depth - dq) <= hp.epsilon.y * dq;
-                }
+            if p.w == W_DIRECTION {
+                agrees = is_inf(before);
+            } else {
+                agrees = !is_inf(before) && abs(r.depth - before) <= hp.epsilon.y * before;
             }
             if agrees {
                 word = word | 2u;
