@@ -118,7 +118,15 @@ fn recycled_buffers_leave_no_trace() {
         track: &hist_a.track,
         color: &ca,
     };
-    let bg_a = background::collect(Vec::new(), &cam_a, seeds_a, levels, None, tol);
+    let bg_a = background::collect(
+        Vec::new(),
+        &cam_a,
+        seeds_a,
+        levels,
+        None,
+        tol,
+        &mut Vec::new(),
+    );
     let origin = b.meta.camera.pose.position;
     let cam_b = PassCamera::new(&b.meta.camera, b.meta.size, origin);
     let prev_cam = PassCamera::new(&a.meta.camera, a.meta.size, origin);
@@ -185,7 +193,17 @@ fn recycled_buffers_leave_no_trace() {
         pos: [3.0, f32::NAN, 1.0, 1.0],
         color: [9.0, 9.0, 9.0, 1.0],
     };
-    let collect = |reuse| background::collect(reuse, &cam_b, seeds_b, levels, Some(prev_bg), tol);
+    let collect = |reuse| {
+        background::collect(
+            reuse,
+            &cam_b,
+            seeds_b,
+            levels,
+            Some(prev_bg),
+            tol,
+            &mut Vec::new(),
+        )
+    };
     let clean = collect(Vec::new());
     let dirty = collect(vec![junk; levels.total() as usize]);
     assert!(clean.iter().any(Texel::is_valid));
@@ -193,4 +211,41 @@ fn recycled_buffers_leave_no_trace() {
         bytemuck::cast_slice::<_, u32>(&clean),
         bytemuck::cast_slice::<_, u32>(&dirty)
     );
+    // The fragments carried over are every valid texel that is not one of
+    // this frame's seeds, each once, ascending, whatever the list held:
+    // with frame b's background as the previous one of a camera moved
+    // back and aside, so that much of it lands elsewhere, some behind.
+    let mut aside = b.meta.camera;
+    aside.pose.position -= glam::DVec3::new(0.3, 0.2, 0.6);
+    let again = PrevBackground {
+        camera: PassCamera::new(&aside, b.meta.size, origin),
+        texels: &clean,
+        levels,
+    };
+    let mut carried = vec![7, 7, 3];
+    let reuse = vec![junk; levels.total() as usize];
+    let prev = Some(again);
+    let clean = background::collect(
+        Vec::new(),
+        &cam_b,
+        seeds_b,
+        levels,
+        prev,
+        tol,
+        &mut Vec::new(),
+    );
+    let listed = background::collect(reuse, &cam_b, seeds_b, levels, prev, tol, &mut carried);
+    assert_eq!(
+        bytemuck::cast_slice::<_, u32>(&listed),
+        bytemuck::cast_slice::<_, u32>(&clean)
+    );
+    let seeded = |i: usize| fresh.track.get(i).is_some_and(|&t| background::seeds(t));
+    let expected: Vec<u32> = (0..clean.len())
+        .filter(|&i| clean[i].is_valid() && !seeded(i))
+        .map(|i| i as u32)
+        .collect();
+    assert!(expected.len() > 100, "{} carried", expected.len());
+    assert!(expected.iter().any(|&i| i < n as u32), "some on level 0");
+    assert!(expected.iter().any(|&i| i >= n as u32), "some coarser");
+    assert_eq!(carried, expected);
 }

@@ -34,6 +34,9 @@ struct FrameState {
     k: u32,
     levels: Levels,
     background: Vec<background::Texel>,
+    /// The slots of its fragments carried over from earlier frames, which
+    /// background fill projects (`background::collect`).
+    carried: Vec<u32>,
     /// Shading correction's `(r_t, aligned r_{t−1})` per pixel and flow
     /// per block; empty without an estimate.
     ratio: Vec<[f32; 2]>,
@@ -229,6 +232,7 @@ impl Executor for CpuBackend {
                 k: plan.k,
                 levels: plan.levels,
                 background: Vec::new(),
+                carried: Vec::new(),
                 ratio: Vec::new(),
                 flow: Vec::new(),
                 luma: Vec::new(),
@@ -283,11 +287,13 @@ impl Executor for CpuBackend {
             });
         let n = i.state.frame.depth.len();
         let (h, color) = (&i.state.history, &i.state.color);
-        let reuse = i
-            .spare
-            .as_mut()
-            .map(|s| std::mem::take(&mut s.background))
-            .unwrap_or_default();
+        let (reuse, mut carried) = match i.spare.as_mut() {
+            Some(s) => (
+                std::mem::take(&mut s.background),
+                std::mem::take(&mut s.carried),
+            ),
+            None => Default::default(),
+        };
         i.state.background = timed(&mut self.timings, Pass::Background, || {
             let seeds = background::Seeds {
                 p0: &h.positions[..n],
@@ -295,8 +301,10 @@ impl Executor for CpuBackend {
                 color,
             };
             let (levels, tolerance) = (plan.levels, plan.tolerance);
-            background::collect(reuse, &plan.camera, seeds, levels, prev, tolerance)
+            let camera = &plan.camera;
+            background::collect(reuse, camera, seeds, levels, prev, tolerance, &mut carried)
         });
+        i.state.carried = carried;
         Ok(())
     }
 
@@ -517,18 +525,12 @@ impl Executor for CpuBackend {
         timed(t, Pass::BgFill, || {
             let (bg, camera) = (&cur.background, &cur.camera);
             let slots = 0..job.bg_target.total() as usize;
-            // Level 0's fragments seeded by this frame's own static pixels
-            // land where the warp already wrote (`background::seeds`): they
-            // cannot fill a hole, so they are not projected.
-            let track = &cur.history.track;
-            let seeded = |i: usize| track.get(i).is_some_and(|&t| background::seeds(t));
+            // Only the fragments carried over from earlier frames can fill
+            // a hole (`background::collect`): level 0's seeds are this
+            // frame's static pixels, which land where the warp already
+            // wrote (`background::seeds`).
             let layout = bgfill::Layout::new(cur.levels, job.bg_target);
-            // Most fragments are seeds or empty: only those that land
-            // are splatted.
-            let winners = splat::resolve_sparse(bg.len(), slots, |i| {
-                if seeded(i) {
-                    return splat::Candidate::MISS;
-                }
+            let winners = splat::resolve_listed(&cur.carried, slots, |i| {
                 bgfill::candidate(i, &bg[i], &job.target, &layout)
             });
             bgfill::resolve(&winners, bg, job.bg_target, camera, job.map, out);
