@@ -67,18 +67,22 @@ pub struct Winners {
 impl Winners {
     /// Index of the candidate that won `slot`, or `None`.
     pub fn winner(&self, slot: usize) -> Option<usize> {
-        Word(self.get(slot)).winner()
+        match self.stored(slot) {
+            0 => None,
+            s => Some(!s as usize),
+        }
     }
 
     /// Depth of the winner of `slot`, or `None`.
     pub fn depth(&self, slot: usize) -> Option<f32> {
-        Word(self.get(slot)).depth()
+        let key = self.key(slot);
+        (key != 0).then(|| key_depth(key))
     }
 
     /// The winning key of `slot` as the `splat_key` kernel leaves it (0 when
     /// empty).
     pub fn key(&self, slot: usize) -> u32 {
-        Word(self.get(slot)).key()
+        (self.get(slot) >> 32) as u32
     }
 
     /// `!index` of the winner of `slot` as the `splat_index` kernel leaves
@@ -93,78 +97,6 @@ impl Winners {
             .and_then(|i| self.packed.get(i))
             .copied()
             .unwrap_or(0)
-    }
-}
-
-/// The winners of a splat of few candidates ([`resolve_listed`]): only the
-/// slots won, ascending, each with its packed word (as [`Winners`] packs
-/// it), found by a binary search. Nothing the size of the range is cleared
-/// or kept.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct FewWinners {
-    won: Vec<(u32, u64)>,
-}
-
-impl FewWinners {
-    /// The packed word of `slot` (0 where it was not won).
-    fn get(&self, slot: usize) -> u64 {
-        let Ok(slot) = u32::try_from(slot) else {
-            return 0;
-        };
-        match self.won.binary_search_by_key(&slot, |&(s, _)| s) {
-            Ok(k) => self.won[k].1,
-            Err(_) => 0,
-        }
-    }
-}
-
-/// Who won a slot of a splat and how deep: what a pass that reads the
-/// winners slot by slot asks, of [`Winners`] or [`FewWinners`] alike.
-pub trait Won: Sync {
-    /// Index of the candidate that won `slot`, or `None`.
-    fn winner(&self, slot: usize) -> Option<usize>;
-    /// Depth of the winner of `slot`, or `None`.
-    fn depth(&self, slot: usize) -> Option<f32>;
-}
-
-impl Won for Winners {
-    fn winner(&self, slot: usize) -> Option<usize> {
-        Winners::winner(self, slot)
-    }
-    fn depth(&self, slot: usize) -> Option<f32> {
-        Winners::depth(self, slot)
-    }
-}
-
-impl Won for FewWinners {
-    fn winner(&self, slot: usize) -> Option<usize> {
-        Word(self.get(slot)).winner()
-    }
-    fn depth(&self, slot: usize) -> Option<f32> {
-        Word(self.get(slot)).depth()
-    }
-}
-
-/// A slot's packed word: the winning key in the high half, `!index` of
-/// the winner in the low half, 0 when empty.
-#[derive(Clone, Copy)]
-struct Word(u64);
-
-impl Word {
-    fn winner(self) -> Option<usize> {
-        match self.0 as u32 {
-            0 => None,
-            s => Some(!s as usize),
-        }
-    }
-
-    fn key(self) -> u32 {
-        (self.0 >> 32) as u32
-    }
-
-    fn depth(self) -> Option<f32> {
-        let key = self.key();
-        (key != 0).then(|| key_depth(key))
     }
 }
 
@@ -207,31 +139,22 @@ pub fn resolve_with(
 }
 
 /// [`resolve_with`] over the candidates of the listed `elements` only,
-/// every other element landing nowhere: for a pass that knows which few of
-/// its elements can land (background fill: the fragments carried over from
+/// every other element landing nowhere: for a pass that knows which of its
+/// elements can land (background fill: the fragments carried over from
 /// earlier frames, `background::collect`, a few thousand of 1.2 M at
-/// 720p). The same winners, as [`FewWinners`]: the words of the landing
-/// candidates sorted by slot, the largest of each slot kept.
+/// 720p, except after the history restarts). The same winners.
 pub fn resolve_listed(
     elements: &[u32],
     range: std::ops::Range<usize>,
     candidate: impl Fn(usize) -> Candidate + Sync + Send,
-) -> FewWinners {
+) -> Winners {
     use rayon::prelude::*;
-    let mut won: Vec<(u32, u64)> = elements
+    let slots = Slots::new(range);
+    elements
         .par_iter()
         .with_min_len(1024)
-        .filter_map(|&i| {
-            let c = candidate(i as usize);
-            range
-                .contains(&(c.slot as usize))
-                .then(|| (c.slot, Slots::value(i as usize, c)))
-        })
-        .collect();
-    // By slot, the largest word first; then the first of each slot.
-    won.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)));
-    won.dedup_by_key(|&mut (slot, _)| slot);
-    FewWinners { won }
+        .for_each(|&i| slots.take(i as usize, candidate(i as usize)));
+    slots.winners()
 }
 
 /// The packed words of a range of slots as the atomic maximum of each
@@ -519,13 +442,7 @@ mod tests {
             false => Candidate::MISS,
         };
         let dense = resolve_with(n, range.clone(), only);
-        let few = resolve_listed(&elements, range.clone(), candidate);
-        // Every slot, in the range and around it.
-        for s in 0..12_000 {
-            assert_eq!(Won::winner(&few, s), dense.winner(s), "slot {s}");
-            let bits = |d: Option<f32>| d.map(f32::to_bits);
-            assert_eq!(bits(Won::depth(&few, s)), bits(dense.depth(s)), "slot {s}");
-        }
+        assert_eq!(resolve_listed(&elements, range.clone(), candidate), dense);
         let won = |w: &Winners| range.clone().filter(|&s| w.winner(s).is_some()).count();
         assert!(won(&dense) > 90);
         // The unlisted ones would have won some of the slots.

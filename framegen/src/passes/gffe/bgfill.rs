@@ -15,7 +15,7 @@ use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{BACKGROUND, DisplayMap, EMPTY, Output};
 use crate::passes::common::camera::{PassCamera, pixel_center};
 use crate::passes::common::levels::{Grid, Levels};
-use crate::passes::common::splat::{Candidate, Won, depth_key};
+use crate::passes::common::splat::{Candidate, Winners, depth_key};
 use crate::passes::gffe::background::{MAX_LEVELS, Texel};
 
 /// CPU reference of `bgfill_project`: one candidate per background texel.
@@ -97,7 +97,7 @@ pub fn candidate(i: usize, t: &Texel, camera: &PassCamera, layout: &Layout) -> C
 /// CPU reference of `bgfill_resolve`: fills the holes of `out`. `current`
 /// is the rendered frame's camera (for the motion vectors).
 pub fn resolve(
-    winners: &impl Won,
+    winners: &Winners,
     bg: &[Texel],
     target: Levels,
     current: &PassCamera,
