@@ -305,6 +305,7 @@ impl FrameGenerator {
             levels,
             tolerance: self.settings.depth_tolerance,
             shading: self.settings.effective_shading(),
+            planes: self.settings.warps_catmull_rom(),
         };
         let mut prev = match (&self.current, restart) {
             (Some(c), None) => {

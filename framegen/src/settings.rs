@@ -162,6 +162,15 @@ impl Settings {
         self.shading && self.method == Method::Gffe && self.effects.moving_shading
     }
 
+    /// Whether the generated frames are warped with the Catmull-Rom filter,
+    /// whose runs read the rendered colour as planes
+    /// (`resample_run::Planes`): the CPU executor makes them as it takes
+    /// the frame in.
+    pub fn warps_catmull_rom(&self) -> bool {
+        matches!(self.method, Method::Gffe | Method::Reproject)
+            && self.resample == Resample::CatmullRom
+    }
+
     /// The stages these settings run ([`Plan::of`]).
     pub fn plan(&self) -> Plan {
         Plan::of(self)

@@ -43,6 +43,12 @@ struct FrameState {
     flow: Vec<[f32; 4]>,
     /// Its luminances, written by its estimate for the next one's.
     luma: Vec<f32>,
+    /// Its colour as planes of one channel, for the warp's Catmull-Rom
+    /// runs (`resample_run.rs`): made as the colour is widened where the
+    /// plan warps with them (`IngestPlan::planes`), else at the first
+    /// warp; shading correction's changes are written into them as into
+    /// `color`, and undone alike.
+    planes: Planes,
 }
 
 /// A rendered frame being ingested (between `upload` and `ingested`).
@@ -85,9 +91,6 @@ pub struct CpuBackend {
     /// continuous target position), for the resampling filter; kept from
     /// frame to frame.
     landings: Vec<AtomicU64>,
-    /// The warped colour as planes of one channel, for the resampling
-    /// filter's runs (`resample_run.rs`); kept from frame to frame.
-    planes: Planes,
     /// The pixels shading correction changed in the current frame's colour
     /// for the warp of the generated frame being made, with the colours
     /// they had: put back after the warp ([`CpuBackend::restore`]), so
@@ -193,6 +196,7 @@ impl CpuBackend {
         if let Some(cur) = self.current.as_mut() {
             for (i, c) in self.undo.drain(..) {
                 cur.color[i as usize] = c;
+                cur.planes.set(i as usize, c);
             }
         }
         self.undo.clear();
@@ -218,9 +222,19 @@ impl Executor for CpuBackend {
         // Into the colour buffer of the frame before the previous one; a
         // frame nothing tracks is widened only if a crop needs it.
         let reuse = spare.as_mut().map(|s| std::mem::take(&mut s.color));
-        let color = match plan.k {
-            0 => Vec::new(),
-            _ => widen::widen_into(&frame.color, reuse.unwrap_or_default()),
+        let reuse = reuse.unwrap_or_default();
+        // With its planes, where the generated frames take them (into
+        // those of the frame before the previous one; never kept stale).
+        let mut planes = Planes::default();
+        let color = match (plan.k, plan.planes) {
+            (0, _) => Vec::new(),
+            (_, true) => {
+                if let Some(s) = spare.as_mut() {
+                    planes = std::mem::take(&mut s.planes);
+                }
+                widen::widen_planes_into(&frame.color, reuse, &mut planes)
+            }
+            (_, false) => widen::widen_into(&frame.color, reuse),
         };
         self.ingest = Some(Ingest {
             state: FrameState {
@@ -236,6 +250,7 @@ impl Executor for CpuBackend {
                 ratio: Vec::new(),
                 flow: Vec::new(),
                 luma: Vec::new(),
+                planes,
             },
             prev,
             spare,
@@ -423,6 +438,7 @@ impl Executor for CpuBackend {
             let changes = shading::changes(&e, job.alpha).unwrap_or_default();
             for (i, c) in changes {
                 undo.push((i, std::mem::replace(&mut cur.color[i as usize], c)));
+                cur.planes.set(i as usize, c);
             }
         });
         Ok(())
@@ -443,13 +459,28 @@ impl Executor for CpuBackend {
     /// `motion::estimate`, `warp::project` and `splat::resolve` in turn;
     /// its time includes the motion pass).
     fn warp(&mut self, job: &Job) -> Result<(), FramegenError> {
-        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let cur = self.current.as_mut().ok_or(FramegenError::NoFrame)?;
+        // Planes the upload did not make (a plan without them): from the
+        // colour as the warp takes it, shading-corrected.
+        let runs = job.resample == Resample::CatmullRom;
+        if runs && !cur.planes.usable(cur.color.len()) {
+            cur.planes.fill(&cur.color);
+        }
+        let cur = &*cur;
+        // They are the colour as the warp takes it, shading's changes
+        // included (checked in debug builds).
+        debug_assert!(
+            !runs || {
+                let mut fresh = Planes::default();
+                fresh.fill(&cur.color);
+                fresh == cur.planes
+            }
+        );
         let alpha = self
             .motion
             .take()
             .ok_or(FramegenError::PassOrder("warp() before motion()"))?;
         let landings = &mut self.landings;
-        let planes = &mut self.planes;
         let out = timed(&mut self.timings, Pass::Warp, || {
             let (w, h) = (job.target.width(), job.target.height());
             let (positions, track) = (&cur.history.positions, &cur.history.track);
@@ -502,14 +533,10 @@ impl Executor for CpuBackend {
                 filter: job.resample,
                 size: (w, h),
             };
-            // The runs filter Catmull-Rom's taps (`resample_run.rs`); the
-            // planes take about a quarter of what the runs save at 720p.
-            let mut out = match job.resample {
-                Resample::CatmullRom => {
-                    planes.fill(source.color);
-                    warp::resolve_runs(&winners, source, planes, landing, how)
-                }
-                _ => warp::resolve(&winners, source, landing, how),
+            // The runs filter Catmull-Rom's taps (`resample_run.rs`).
+            let mut out = match runs {
+                true => warp::resolve_runs(&winners, source, &cur.planes, landing, how),
+                false => warp::resolve(&winners, source, landing, how),
             };
             warp::close_cracks(&mut out);
             out

@@ -115,6 +115,9 @@ pub struct IngestPlan {
     /// Whether shading correction's estimate runs (gffe with
     /// `Settings::shading`; it needs the history's static test).
     pub shading: bool,
+    /// Whether the generated frames take the colour's planes
+    /// (`Settings::warps_catmull_rom`).
+    pub planes: bool,
 }
 
 impl IngestPlan {

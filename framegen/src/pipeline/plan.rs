@@ -66,6 +66,7 @@ impl Plan {
             levels: Levels::new(settings.effective_levels(), 1, 1),
             tolerance: settings.depth_tolerance,
             shading: settings.effective_shading(),
+            planes: settings.warps_catmull_rom(),
         };
         let job = Job {
             method: settings.method,

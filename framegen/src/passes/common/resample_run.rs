@@ -40,7 +40,7 @@ type Lanes = [f32; RUN];
 
 /// A source image's colour as planes of one channel: a run's tap is one
 /// stretch of each. Its buffers are reused from frame to frame.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Planes {
     red: Vec<f32>,
     green: Vec<f32>,
@@ -55,26 +55,62 @@ pub struct Planes {
 impl Planes {
     /// The planes of `color`, written on all cores into the buffers kept.
     pub fn fill(&mut self, color: &[[f32; 4]]) {
+        let mut none = vec![(); color.len()];
+        self.fill_with(&mut none, 4096, |first, _, r, g, b| {
+            Self::transpose(&color[first..first + r.len()], r, g, b)
+        });
+    }
+
+    /// The planes of `other.len()` pixels made on all cores, block by
+    /// block alongside the same block of `other`: `make(first, other, red,
+    /// green, blue)` writes the pixels from `first` (those of `other` too,
+    /// while they are in the cache) and says whether they are all opaque.
+    pub fn fill_with<T: Send>(
+        &mut self,
+        other: &mut [T],
+        block: usize,
+        make: impl Fn(usize, &mut [T], &mut [f32], &mut [f32], &mut [f32]) -> bool + Sync + Send,
+    ) {
         use rayon::prelude::*;
-        let n = color.len();
+        let (n, block) = (other.len(), block.max(1));
         for plane in [&mut self.red, &mut self.green, &mut self.blue] {
             plane.resize(n, 0.0);
         }
-        const BLOCK: usize = 4096;
-        let planes = (self.red.par_chunks_mut(BLOCK))
-            .zip(self.green.par_chunks_mut(BLOCK))
-            .zip(self.blue.par_chunks_mut(BLOCK))
-            .zip(color.par_chunks(BLOCK));
+        let planes = (self.red.par_chunks_mut(block))
+            .zip(self.green.par_chunks_mut(block))
+            .zip(self.blue.par_chunks_mut(block))
+            .zip(other.par_chunks_mut(block))
+            .enumerate();
         self.opaque = planes
-            .map(|(((r, g), b), c)| {
-                let mut opaque = true;
-                for (k, p) in c.iter().enumerate() {
-                    (r[k], g[k], b[k]) = (p[0], p[1], p[2]);
-                    opaque &= p[3] == 1.0;
-                }
-                opaque
-            })
+            .map(|(k, (((r, g), b), o))| make(k * block, o, r, g, b))
             .reduce(|| true, |a, b| a & b);
+    }
+
+    /// `color`'s channels into `r`, `g` and `b` (as long): whether every
+    /// alpha is 1.
+    #[inline]
+    pub fn transpose(color: &[[f32; 4]], r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> bool {
+        let mut opaque = true;
+        for (k, p) in color.iter().enumerate() {
+            (r[k], g[k], b[k]) = (p[0], p[1], p[2]);
+            opaque &= p[3] == 1.0;
+        }
+        opaque
+    }
+
+    /// Pixel `i`'s colour replaced by `c` (shading correction's changes
+    /// and their undoing), as [`Planes::fill`] of the changed image would
+    /// hold it; a `c` that is not opaque leaves no runs taken until the
+    /// next fill (they give the pixels' own bits either way).
+    pub fn set(&mut self, i: usize, c: [f32; 4]) {
+        if let (Some(r), Some(g), Some(b)) = (
+            self.red.get_mut(i),
+            self.green.get_mut(i),
+            self.blue.get_mut(i),
+        ) {
+            (*r, *g, *b) = (c[0], c[1], c[2]);
+        }
+        self.opaque &= c[3] == 1.0;
     }
 
     /// Whether these are the planes of an image of `n` pixels that runs
