@@ -460,28 +460,28 @@ impl Executor for CpuBackend {
     /// its time includes the motion pass).
     fn warp(&mut self, job: &Job) -> Result<(), FramegenError> {
         let cur = self.current.as_mut().ok_or(FramegenError::NoFrame)?;
-        // Planes the upload did not make (a plan without them): from the
-        // colour as the warp takes it, shading-corrected.
-        let runs = job.resample == Resample::CatmullRom;
-        if runs && !cur.planes.usable(cur.color.len()) {
-            cur.planes.fill(&cur.color);
-        }
-        let cur = &*cur;
-        // They are the colour as the warp takes it, shading's changes
-        // included (checked in debug builds).
-        debug_assert!(
-            !runs || {
-                let mut fresh = Planes::default();
-                fresh.fill(&cur.color);
-                fresh == cur.planes
-            }
-        );
         let alpha = self
             .motion
             .take()
             .ok_or(FramegenError::PassOrder("warp() before motion()"))?;
         let landings = &mut self.landings;
+        let runs = job.resample == Resample::CatmullRom;
         let out = timed(&mut self.timings, Pass::Warp, || {
+            // Planes the upload did not make (a plan without them): from
+            // the colour as the warp takes it, shading-corrected.
+            if runs && !cur.planes.usable(cur.color.len()) {
+                cur.planes.fill(&cur.color);
+            }
+            let cur = &*cur;
+            // They are that colour, shading's changes included (checked in
+            // debug builds).
+            debug_assert!(
+                !runs || {
+                    let mut fresh = Planes::default();
+                    fresh.fill(&cur.color);
+                    fresh == cur.planes
+                }
+            );
             let (w, h) = (job.target.width(), job.target.height());
             let (positions, track) = (&cur.history.positions, &cur.history.track);
             let filtered = job.resample != Resample::Nearest;
