@@ -268,7 +268,7 @@ impl<F: Fn(usize) -> Vec2> Resolver<'_, F> {
         let map = self.how.map;
         for l in 0..RUN {
             let c = match &colors {
-                Some(c) => c[l],
+                Some(c) => [c[0][l], c[1][l], c[2][l]],
                 None => resample::resample(self.source, first + l, at[l], filter),
             };
             color[l] = [c[0], c[1], c[2], 1.0];
