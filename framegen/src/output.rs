@@ -120,6 +120,19 @@ impl Rows<'_> {
     }
 }
 
+/// Consecutive pixels of an [`Output`], read only (`pack`'s bands).
+#[derive(Clone, Copy, Debug)]
+pub struct Band<'a> {
+    /// Linear RGB, alpha 1 where written.
+    pub color: &'a [[f32; 4]],
+    /// Linear view depth.
+    pub depth: &'a [f32],
+    /// Motion, displayed pixels.
+    pub motion: &'a [[f32; 2]],
+    /// Where each came from ([`EMPTY`], [`WARPED`], ...).
+    pub mask: &'a [u32],
+}
+
 /// A generated frame in the making (CPU reference).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Output {
@@ -212,6 +225,16 @@ impl Output {
             out.mask.set_len(n);
         }
         out
+    }
+
+    /// Pixels `range` of the frame, read only.
+    pub fn band(&self, range: std::ops::Range<usize>) -> Band<'_> {
+        Band {
+            color: &self.color[range.clone()],
+            depth: &self.depth[range.clone()],
+            motion: &self.motion[range.clone()],
+            mask: &self.mask[range],
+        }
     }
 
     /// Number of pixels with the given mask value, counted on all cores (a

@@ -17,7 +17,7 @@ use half::f16;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::input::{CONVERT_BLOCK, MAX_RADIANCE};
-use crate::output::{Output, PixelSource};
+use crate::output::{Band, Output, PixelSource};
 
 /// A generated frame's buffers, packed.
 #[derive(Clone, Debug, PartialEq)]
@@ -47,17 +47,63 @@ pub fn radiance(v: f32) -> f32 {
     }
 }
 
-/// CPU reference of `pack`, on all cores, each buffer made where it is
-/// written (`par::blocks`). Colour in blocks: sanitised on
-/// the stack, then converted with the CPU's `f16` instructions in one call
-/// (`half`'s slice conversion, rounding to nearest like `f16::from_f32`).
+/// CPU reference of `pack`, on all cores, band by band into buffers made
+/// where they are written ([`pack_band`]).
 pub fn pack(out: &Output) -> Packed {
-    use half::slice::HalfFloatSliceExt;
     use rayon::prelude::*;
-    let color = crate::par::blocks([f16::ZERO; 4], out.color.len(), CONVERT_BLOCK, |k, dst| {
-        let src = &out.color[k * CONVERT_BLOCK..][..dst.len()];
+    let n = out.mask.len();
+    let b = crate::par::band(out.width as usize, n);
+    let mut to = Unpacked::new(n);
+    to.bands(b).enumerate().for_each(|(k, to)| {
+        let first = k * b;
+        pack_band(out.band(first..first + to.mask.len()), to);
+    });
+    // SAFETY: every band was handed out and written.
+    unsafe { to.packed(out.width, out.height) }
+}
+
+/// A packed frame's colour of one pixel: [`radiance`], alpha 1, to the
+/// nearest `f16`.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // tests only there
+#[inline]
+fn packed_color(c: [f32; 4]) -> [f16; 4] {
+    let c = c.map(radiance);
+    [c[0], c[1], c[2], 1.0].map(f16::from_f32)
+}
+
+/// A packed frame's depth: `+inf` where no surface was written.
+#[inline]
+fn packed_depth(d: f32) -> f32 {
+    if d > 0.0 { d } else { f32::INFINITY }
+}
+
+/// A packed frame's motion component: 0 where not finite.
+#[inline]
+fn packed_motion(v: f32) -> f32 {
+    if v.is_finite() { v } else { 0.0 }
+}
+
+/// Packs `from` into `to` (as long): with AVX2 and F16C where the CPU
+/// has them ([`pack_band_f16c`]), else colour in blocks, sanitised on the
+/// stack and converted with `half`'s slice conversion (rounding to
+/// nearest, like `f16::from_f32`).
+fn pack_band(from: Band<'_>, to: PackedBand<'_>) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("f16c") {
+        // SAFETY: the CPU has both, just checked.
+        return unsafe { pack_band_f16c(from, to) };
+    }
+    pack_band_blocks(from, to);
+}
+
+/// [`pack_band`] on any CPU.
+fn pack_band_blocks(from: Band<'_>, to: PackedBand<'_>) {
+    use half::slice::HalfFloatSliceExt;
+    let blocks = (to.color.chunks_mut(CONVERT_BLOCK)).zip(from.color.chunks(CONVERT_BLOCK));
+    // Cleared once for the band, not per block (16 KB each time).
+    let mut clean = [[0.0f32; 4]; CONVERT_BLOCK];
+    for (dst, src) in blocks {
         // Lane by lane, then alpha: loops the compiler vectorises.
-        let mut clean = [[0.0f32; 4]; CONVERT_BLOCK];
         let lanes = clean.as_flattened_mut().iter_mut();
         for (c, &s) in lanes.zip(src.as_flattened()) {
             *c = radiance(s);
@@ -67,30 +113,135 @@ pub fn pack(out: &Output) -> Packed {
         }
         dst.as_flattened_mut()
             .convert_from_f32_slice(clean[..src.len()].as_flattened());
-    });
-    Packed {
-        width: out.width,
-        height: out.height,
-        color,
-        depth: out
-            .depth
-            .par_iter()
-            .map(|&d| if d > 0.0 { d } else { f32::INFINITY })
-            .collect(),
-        // In blocks, component by component (a closure per component was
-        // not inlined).
-        motion: crate::par::blocks([0.0f32; 2], out.motion.len(), CONVERT_BLOCK, |k, dst| {
-            let src = &out.motion[k * CONVERT_BLOCK..][..dst.len()];
-            let lanes = dst.as_flattened_mut().iter_mut();
-            for (d, &v) in lanes.zip(src.as_flattened()) {
-                *d = if v.is_finite() { v } else { 0.0 };
-            }
-        }),
-        mask: out
-            .mask
-            .par_iter()
-            .map(|&m| PixelSource::from_mask(m))
-            .collect(),
+    }
+    pack_rest(from, to);
+}
+
+/// [`pack_band`] with AVX2 and F16C: two pixels' colour a register,
+/// sanitised, given alpha 1 and rounded to `f16` (`vcvtps2ph`, to nearest
+/// even: `f16::from_f32`'s bits) without a buffer between; the rest
+/// compiled for eight lanes. A 720p frame's packing 2.2 → 1.4 ms, paired.
+///
+/// # Safety
+///
+/// The CPU has AVX2 and F16C.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,f16c")]
+unsafe fn pack_band_f16c(from: Band<'_>, to: PackedBand<'_>) {
+    use std::arch::x86_64::*;
+    let (zero, max) = (_mm256_setzero_ps(), _mm256_set1_ps(MAX_RADIANCE));
+    let (inf, one) = (_mm256_set1_ps(f32::INFINITY), _mm256_set1_ps(1.0));
+    let pairs = to.color.chunks_exact_mut(2).zip(from.color.chunks_exact(2));
+    for (dst, src) in pairs {
+        // SAFETY: two pixels of four `f32`s, 32 bytes, unaligned load.
+        let v = unsafe { _mm256_loadu_ps(src.as_ptr().cast()) };
+        // `radiance`: `0 < v < ∞` (NaN fails), then at most the largest.
+        let keep = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GT_OQ>(v, zero),
+            _mm256_cmp_ps::<_CMP_LT_OQ>(v, inf),
+        );
+        let clean = _mm256_and_ps(keep, _mm256_min_ps(v, max));
+        let opaque = _mm256_blend_ps::<0b1000_1000>(clean, one);
+        let half = _mm256_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(opaque);
+        // SAFETY: two pixels of four `f16`s, 16 bytes, unaligned store.
+        unsafe { _mm_storeu_si128(dst.as_mut_ptr().cast(), half) };
+    }
+    let odd = from.color.len() / 2 * 2;
+    for (dst, src) in to.color[odd..].iter_mut().zip(&from.color[odd..]) {
+        *dst = packed_color(*src);
+    }
+    pack_rest(from, to);
+}
+
+/// [`pack_band`]'s depth, motion and source.
+#[inline(always)]
+fn pack_rest(from: Band<'_>, to: PackedBand<'_>) {
+    for (d, &v) in to.depth.iter_mut().zip(from.depth) {
+        *d = packed_depth(v);
+    }
+    // Component by component (a closure per component was not inlined).
+    let lanes = to.motion.as_flattened_mut().iter_mut();
+    for (d, &v) in lanes.zip(from.motion.as_flattened()) {
+        *d = packed_motion(v);
+    }
+    for (d, &m) in to.mask.iter_mut().zip(from.mask) {
+        *d = PixelSource::from_mask(m);
+    }
+}
+
+/// One band of a [`Packed`] being made.
+struct PackedBand<'a> {
+    color: &'a mut [[f16; 4]],
+    depth: &'a mut [f32],
+    motion: &'a mut [[f32; 2]],
+    mask: &'a mut [PixelSource],
+}
+
+/// The buffers of a [`Packed`] of `n` pixels, being made band by band.
+struct Unpacked {
+    n: usize,
+    color: Vec<[f16; 4]>,
+    depth: Vec<f32>,
+    motion: Vec<[f32; 2]>,
+    mask: Vec<PixelSource>,
+}
+
+impl Unpacked {
+    fn new(n: usize) -> Self {
+        Self {
+            n,
+            color: Vec::with_capacity(n),
+            depth: Vec::with_capacity(n),
+            motion: Vec::with_capacity(n),
+            mask: Vec::with_capacity(n),
+        }
+    }
+
+    /// The bands of `b` pixels (the last one shorter), in order, each
+    /// filled first where it is handed out (`par::init`: in the cache).
+    fn bands(
+        &mut self,
+        b: usize,
+    ) -> impl rayon::iter::IndexedParallelIterator<Item = PackedBand<'_>> {
+        use crate::par::init;
+        use rayon::prelude::*;
+        let n = self.n;
+        (self.color.spare_capacity_mut()[..n].par_chunks_mut(b))
+            .zip(self.depth.spare_capacity_mut()[..n].par_chunks_mut(b))
+            .zip(self.motion.spare_capacity_mut()[..n].par_chunks_mut(b))
+            .zip(self.mask.spare_capacity_mut()[..n].par_chunks_mut(b))
+            .map(|(((color, depth), motion), mask)| PackedBand {
+                color: init(color, [f16::ZERO; 4]),
+                depth: init(depth, 0.0),
+                motion: init(motion, [0.0; 2]),
+                mask: init(mask, PixelSource::Filled),
+            })
+    }
+
+    /// The packed frame.
+    ///
+    /// # Safety
+    ///
+    /// Every band of a [`Unpacked::bands`] was handed out (`init` wrote
+    /// it).
+    unsafe fn packed(mut self, width: u32, height: u32) -> Packed {
+        let n = self.n;
+        // SAFETY: the caller's promise: the bands cover the first `n`
+        // slots.
+        unsafe {
+            self.color.set_len(n);
+            self.depth.set_len(n);
+            self.motion.set_len(n);
+            self.mask.set_len(n);
+        }
+        Packed {
+            width,
+            height,
+            color: self.color,
+            depth: self.depth,
+            motion: self.motion,
+            mask: self.mask,
+        }
     }
 }
 
@@ -245,5 +396,72 @@ mod tests {
         assert_eq!(p.motion[2], [2.0, 0.0]);
         assert_eq!(p.mask[5], PixelSource::Warped);
         assert_eq!(p.color[3][2], f16::ZERO);
+    }
+
+    /// Every way of packing gives the same bits: the bands with and
+    /// without F16C, each pixel alone, over values that
+    /// sanitising and rounding treat apart (NaN, infinities, negatives,
+    /// −0, subnormal and tie halves, beyond the largest `f16`), an odd
+    /// number of pixels over several blocks.
+    #[test]
+    fn every_packing_gives_the_same_bits() {
+        let special = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -1.0,
+            -0.0,
+            0.0,
+            1e-7,
+            6.0e-8,
+            2.9802322e-8,
+            1.0 + 1.0 / 2048.0,
+            1.0 + 3.0 / 2048.0,
+            65504.0,
+            65520.0,
+            1e9,
+            MAX_RADIANCE,
+            0.333,
+        ];
+        let (w, h) = (1031u32, 3u32);
+        let mut out = Output::empty(w, h);
+        for t in 0..out.mask.len() {
+            let v =
+                |k: usize| special[(t * 7 + k * 3) % special.len()] * (1.0 + (t % 5) as f32 * 0.1);
+            out.color[t] = [v(0), v(1), v(2), v(3)];
+            out.depth[t] = v(4);
+            out.motion[t] = [v(5), v(6)];
+            out.mask[t] = (t % 6) as u32;
+        }
+        let n = out.mask.len();
+        let packed = |f: &(dyn Fn(Band<'_>, PackedBand<'_>) + Sync)| {
+            use rayon::prelude::*;
+            let mut to = Unpacked::new(n);
+            to.bands(n).for_each(|band| f(out.band(0..n), band));
+            // SAFETY: the one band was handed out.
+            unsafe { to.packed(w, h) }
+        };
+        let blocks = packed(&|from, to| pack_band_blocks(from, to));
+        assert_eq!(blocks, pack(&out));
+        for (t, c) in out.color.iter().enumerate() {
+            assert_eq!(
+                blocks.color[t].map(f16::to_bits),
+                packed_color(*c).map(f16::to_bits)
+            );
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("f16c") {
+            // SAFETY: the CPU has both, just checked.
+            let f16c = packed(&|from, to| unsafe { pack_band_f16c(from, to) });
+            let bits = |p: &Packed| {
+                p.color
+                    .iter()
+                    .flatten()
+                    .map(|c| c.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(bits(&f16c), bits(&blocks));
+            assert_eq!(f16c, blocks);
+        }
     }
 }
