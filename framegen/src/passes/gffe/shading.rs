@@ -58,11 +58,11 @@
 //! explicit as a moving band of luminance change. Colour is scaled by the
 //! luminance ratio (hue kept).
 
-use glam::Vec2;
+use glam::{Vec2, Vec4};
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::{cell, cell_inside};
-use crate::passes::common::resample::{floor, same_surface};
+use crate::passes::common::resample::{SAME_SURFACE_RATIO, floor, same_surface};
 use crate::passes::gffe::history::is_dynamic;
 
 /// Added to luminances before their ratio, so black against black is no
@@ -204,13 +204,71 @@ pub fn ratio_at(px: u32, py: u32, lt: f32, cur: &Current<'_>, prev: &Previous<'_
 /// bilinear footprint (on the surface of depth `d`) against `lt`. Out of
 /// line: the common case above stays a short loop.
 #[inline(never)]
-fn footprint(p: Vec2, d: f32, lt: f32, (w, h): (u32, u32), prev: &Previous<'_>) -> f32 {
+fn footprint(p: Vec2, d: f32, lt: f32, size: (u32, u32), prev: &Previous<'_>) -> f32 {
     let luma_at = |s: usize| match prev.luma.get(s) {
         Some(&l) => l,
         None => luminance(prev.color[s]) + LUMA_FLOOR,
     };
-    // The bilinear footprint of the aligned position: what a sub-pixel
-    // shift of the surface's texture could show there.
+    let (lo, hi) = footprint_range(p, d, size, prev.depth, luma_at);
+    against_range(lt, lo, hi)
+}
+
+/// [`footprint`] where the previous frame's luminances are kept (`luma`,
+/// beside its `depth`): a footprint inside the frame is taken in one
+/// vector of its four taps, the same operations lane by lane (and the
+/// range of luminances, which are never NaN, is the same in any order).
+#[inline(never)]
+fn footprint_kept(p: Vec2, d: f32, lt: f32, size: (u32, u32), depth: &[f32], luma: &[f32]) -> f32 {
+    let (w, h) = (size.0 as i32, size.1 as i32);
+    let (bx, by) = (floor(p.x - 0.5), floor(p.y - 0.5));
+    let inside = bx >= 0 && by >= 0 && bx + 1 < w && by + 1 < h;
+    let taps = |v: &[f32]| -> Option<Vec4> {
+        let s = by as usize * w as usize + bx as usize;
+        let (top, bottom) = (v.get(s..s + 2)?, v.get(s + w as usize..s + w as usize + 2)?);
+        Some(Vec4::new(top[0], top[1], bottom[0], bottom[1]))
+    };
+    let found = if inside {
+        taps(depth).zip(taps(luma))
+    } else {
+        None
+    };
+    let Some((depths, lumas)) = found else {
+        let (lo, hi) = footprint_range(p, d, size, depth, |s| luma[s]);
+        return against_range(lt, lo, hi);
+    };
+    let (tx, ty) = (p.x - 0.5 - bx as f32, p.y - 0.5 - by as f32);
+    let weight = Vec4::new(
+        (1.0 - tx) * (1.0 - ty),
+        tx * (1.0 - ty),
+        (1.0 - tx) * ty,
+        tx * ty,
+    );
+    // `same_surface(depth, d)` lane by lane.
+    let d = Vec4::splat(d);
+    let nearer = depths.cmpge(d);
+    let (near, far) = (
+        Vec4::select(nearer, d, depths),
+        Vec4::select(nearer, depths, d),
+    );
+    let surface = near.cmpgt(Vec4::ZERO) & far.cmple(near * SAME_SURFACE_RATIO);
+    let keep = weight.cmpge(Vec4::splat(FOOTPRINT)) & surface;
+    let lo = Vec4::select(keep, lumas, Vec4::INFINITY).min_element();
+    let hi = Vec4::select(keep, lumas, Vec4::ZERO).max_element();
+    against_range(lt, lo, hi)
+}
+
+/// The range of luminances (`luma_at`) of the taps of `p`'s bilinear
+/// footprint that weigh at least [`FOOTPRINT`] and lie on the surface of
+/// depth `d`: what a sub-pixel shift of the surface's texture could show
+/// there. Empty (`lo > hi`) where none does.
+#[inline(always)]
+fn footprint_range(
+    p: Vec2,
+    d: f32,
+    (w, h): (u32, u32),
+    depth: &[f32],
+    luma_at: impl Fn(usize) -> f32,
+) -> (f32, f32) {
     let (bx, by) = (floor(p.x - 0.5), floor(p.y - 0.5));
     let (tx, ty) = (p.x - 0.5 - bx as f32, p.y - 0.5 - by as f32);
     let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
@@ -225,12 +283,18 @@ fn footprint(p: Vec2, d: f32, lt: f32, (w, h): (u32, u32), prev: &Previous<'_>) 
         let s = sy * w as usize + sx;
         // Only taps of the pixel's own surface (not across a silhouette);
         // selects rather than branches (luminances are never NaN).
-        let keep = (weight >= FOOTPRINT) & same_surface(prev.depth[s], d);
+        let keep = (weight >= FOOTPRINT) & same_surface(depth[s], d);
         let l = luma_at(s);
         lo = if keep && l < lo { l } else { lo };
         hi = if keep && l > hi { l } else { hi };
     }
-    // No tap on the surface: nothing to compare with.
+    (lo, hi)
+}
+
+/// The quantised log ratio of `lt` to the nearest end of the range `lo ..=
+/// hi`: 0 inside it, or where it is empty (nothing to compare with).
+#[inline(always)]
+fn against_range(lt: f32, lo: f32, hi: f32) -> f32 {
     let best = if lo > hi {
         0.0
     } else if lt < lo {
@@ -341,7 +405,7 @@ fn ratio_run(
         let i = i as usize;
         let m = motion[i];
         let p = Vec2::new((x0 + i as u32) as f32 + 0.5 + m[0], y as f32 + 0.5 + m[1]);
-        row[i][0] = footprint(p, depth[i], luma[i], cur.size, prev);
+        row[i][0] = footprint_kept(p, depth[i], luma[i], cur.size, prev.depth, prev.luma);
     }
 }
 
@@ -1260,7 +1324,7 @@ mod tests {
     #[test]
     fn the_runs_give_what_ratio_at_gives() {
         // A row that is not a whole number of runs, and every case of
-        // `ratio_at`: dynamic pixels, no surface (0, negative, NaN),
+        // `ratio_at`: dynamic pixels, no surface (0, negative, NaN), sky,
         // positions outside (or NaN), taps off the surface, still pixels,
         // footprints to measure, with and without the previous ratio.
         let (w, h) = (150u32, 7u32);
@@ -1278,6 +1342,7 @@ mod tests {
             1 => -1.0,
             2 => f32::NAN,
             3 => 5.0,
+            4 => f32::INFINITY,
             _ => 1.0 + 0.02 * unit(i, salt + 1),
         };
         let color = |i: usize, salt: u32| {
@@ -1298,6 +1363,7 @@ mod tests {
                 0 => [f32::NAN, 0.0],
                 1 => [1e9, -1e9],
                 2 => [-0.5, 0.0],
+                3 | 4 => [-0.5, 0.5],
                 _ => [8.0 * unit(i, 7) - 4.0, 6.0 * unit(i, 8) - 3.0],
             })
             .collect();
