@@ -185,46 +185,31 @@ impl Output {
     /// makes. For a pass that makes several pixels at once
     /// (`warp::resolve_runs`); [`Output::from_fn`] is one at a time.
     pub fn from_rows(width: u32, height: u32, band: impl Fn(Rows<'_>) + Sync + Send) -> Self {
-        use rayon::prelude::*;
         let n = width as usize * height as usize;
         let e = Pixel::EMPTY;
-        let mut out = Self {
+        // Each band is filled with holes where it is made, while it is in
+        // the cache (`par::bands4`), not in a pass over the whole frame
+        // first (about 0.9 ms of a 720p warp on two cores).
+        let b = crate::par::band(width as usize, n);
+        let fill = (e.color, e.depth, e.motion, e.mask);
+        let planes = crate::par::bands4(n, b, fill, |k, color, depth, motion, mask| {
+            let first = k * b;
+            band(Rows {
+                first,
+                color,
+                depth,
+                motion,
+                mask,
+            })
+        });
+        Self {
             width,
             height,
-            color: Vec::with_capacity(n),
-            depth: Vec::with_capacity(n),
-            motion: Vec::with_capacity(n),
-            mask: Vec::with_capacity(n),
-        };
-        // Each band is filled with holes where it is made, while it is in
-        // the cache (`par::init`), not in a pass over the whole frame first
-        // (about 0.9 ms of a 720p warp on two cores).
-        let b = crate::par::band(width as usize, n);
-        (out.color.spare_capacity_mut()[..n].par_chunks_mut(b))
-            .zip(out.depth.spare_capacity_mut()[..n].par_chunks_mut(b))
-            .zip(out.motion.spare_capacity_mut()[..n].par_chunks_mut(b))
-            .zip(out.mask.spare_capacity_mut()[..n].par_chunks_mut(b))
-            .enumerate()
-            .for_each(|(k, (((color, depth), motion), mask))| {
-                use crate::par::init;
-                band(Rows {
-                    first: k * b,
-                    color: init(color, e.color),
-                    depth: init(depth, e.depth),
-                    motion: init(motion, e.motion),
-                    mask: init(mask, e.mask),
-                })
-            });
-        // SAFETY: the bands cover the first `n` slots of each buffer and
-        // `init` wrote every one of them; a panic in `band` propagates out
-        // of `for_each` before this.
-        unsafe {
-            out.color.set_len(n);
-            out.depth.set_len(n);
-            out.motion.set_len(n);
-            out.mask.set_len(n);
+            color: planes.0,
+            depth: planes.1,
+            motion: planes.2,
+            mask: planes.3,
         }
-        out
     }
 
     /// Pixels `range` of the frame, read only.

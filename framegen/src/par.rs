@@ -50,6 +50,57 @@ pub fn blocks<T: Copy + Send + Sync>(
     v
 }
 
+/// Four buffers of `n` elements made band by band on all cores, without a
+/// pass that writes them first: band `k` (`b` elements, the last one
+/// shorter) of each is filled with its `fill` value while it is in the
+/// cache, then handed to `make(k, …)`, which writes what it makes over it.
+/// For a frame kept as planes (a generated frame, and it packed).
+pub fn bands4<A, B, C, D>(
+    n: usize,
+    b: usize,
+    fill: (A, B, C, D),
+    make: impl Fn(usize, &mut [A], &mut [B], &mut [C], &mut [D]) + Sync + Send,
+) -> (Vec<A>, Vec<B>, Vec<C>, Vec<D>)
+where
+    A: Copy + Send + Sync,
+    B: Copy + Send + Sync,
+    C: Copy + Send + Sync,
+    D: Copy + Send + Sync,
+{
+    use rayon::prelude::*;
+    let b = b.max(1);
+    let (mut a, mut bb, mut c, mut d) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    (a.spare_capacity_mut()[..n].par_chunks_mut(b))
+        .zip(bb.spare_capacity_mut()[..n].par_chunks_mut(b))
+        .zip(c.spare_capacity_mut()[..n].par_chunks_mut(b))
+        .zip(d.spare_capacity_mut()[..n].par_chunks_mut(b))
+        .enumerate()
+        .for_each(|(k, (((a, bb), c), d))| {
+            make(
+                k,
+                init(a, fill.0),
+                init(bb, fill.1),
+                init(c, fill.2),
+                init(d, fill.3),
+            )
+        });
+    // SAFETY: the bands cover the first `n` slots of each buffer and
+    // `init` wrote every one of them; a panic in `make` propagates out of
+    // `for_each` before this.
+    unsafe {
+        a.set_len(n);
+        bb.set_len(n);
+        c.set_len(n);
+        d.set_len(n);
+    }
+    (a, bb, c, d)
+}
+
 /// `slots` filled with `value`, as the initialised elements they now are.
 pub fn init<T: Copy>(slots: &mut [std::mem::MaybeUninit<T>], value: T) -> &mut [T] {
     for slot in slots.iter_mut() {

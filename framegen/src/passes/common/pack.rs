@@ -50,16 +50,11 @@ pub fn radiance(v: f32) -> f32 {
 /// CPU reference of `pack`, on all cores, band by band into buffers made
 /// where they are written ([`pack_band`]).
 pub fn pack(out: &Output) -> Packed {
-    use rayon::prelude::*;
-    let n = out.mask.len();
-    let b = crate::par::band(out.width as usize, n);
-    let mut to = Unpacked::new(n);
-    to.bands(b).enumerate().for_each(|(k, to)| {
+    let b = crate::par::band(out.width as usize, out.mask.len());
+    made(out.width, out.height, b, |k, to| {
         let first = k * b;
         pack_band(out.band(first..first + to.mask.len()), to);
-    });
-    // SAFETY: every band was handed out and written.
-    unsafe { to.packed(out.width, out.height) }
+    })
 }
 
 /// A packed frame's colour of one pixel: [`radiance`], alpha 1, to the
@@ -177,71 +172,36 @@ struct PackedBand<'a> {
     mask: &'a mut [PixelSource],
 }
 
-/// The buffers of a [`Packed`] of `n` pixels, being made band by band.
-struct Unpacked {
-    n: usize,
-    color: Vec<[f16; 4]>,
-    depth: Vec<f32>,
-    motion: Vec<[f32; 2]>,
-    mask: Vec<PixelSource>,
-}
-
-impl Unpacked {
-    fn new(n: usize) -> Self {
-        Self {
-            n,
-            color: Vec::with_capacity(n),
-            depth: Vec::with_capacity(n),
-            motion: Vec::with_capacity(n),
-            mask: Vec::with_capacity(n),
-        }
-    }
-
-    /// The bands of `b` pixels (the last one shorter), in order, each
-    /// filled first where it is handed out (`par::init`: in the cache).
-    fn bands(
-        &mut self,
-        b: usize,
-    ) -> impl rayon::iter::IndexedParallelIterator<Item = PackedBand<'_>> {
-        use crate::par::init;
-        use rayon::prelude::*;
-        let n = self.n;
-        (self.color.spare_capacity_mut()[..n].par_chunks_mut(b))
-            .zip(self.depth.spare_capacity_mut()[..n].par_chunks_mut(b))
-            .zip(self.motion.spare_capacity_mut()[..n].par_chunks_mut(b))
-            .zip(self.mask.spare_capacity_mut()[..n].par_chunks_mut(b))
-            .map(|(((color, depth), motion), mask)| PackedBand {
-                color: init(color, [f16::ZERO; 4]),
-                depth: init(depth, 0.0),
-                motion: init(motion, [0.0; 2]),
-                mask: init(mask, PixelSource::Filled),
-            })
-    }
-
-    /// The packed frame.
-    ///
-    /// # Safety
-    ///
-    /// Every band of a [`Unpacked::bands`] was handed out (`init` wrote
-    /// it).
-    unsafe fn packed(mut self, width: u32, height: u32) -> Packed {
-        let n = self.n;
-        // SAFETY: the caller's promise: the bands cover the first `n`
-        // slots.
-        unsafe {
-            self.color.set_len(n);
-            self.depth.set_len(n);
-            self.motion.set_len(n);
-            self.mask.set_len(n);
-        }
-        Packed {
-            width,
-            height,
-            color: self.color,
-            depth: self.depth,
-            motion: self.motion,
-            mask: self.mask,
-        }
+/// A `width`×`height` [`Packed`] made band by band on all cores: `make(k,
+/// band)` writes band `k` of `b` pixels (the last one shorter), which is
+/// filled first where it is handed out (`par::bands4`: in the cache).
+fn made(
+    width: u32,
+    height: u32,
+    b: usize,
+    make: impl Fn(usize, PackedBand<'_>) + Sync + Send,
+) -> Packed {
+    let n = width as usize * height as usize;
+    let fill = ([f16::ZERO; 4], 0.0, [0.0; 2], PixelSource::Filled);
+    let planes = crate::par::bands4(n, b, fill, |k, color, depth, motion, mask| {
+        make(
+            k,
+            PackedBand {
+                color,
+                depth,
+                motion,
+                mask,
+            },
+        )
+    });
+    let (color, depth, motion, mask) = planes;
+    Packed {
+        color,
+        depth,
+        motion,
+        mask,
+        width,
+        height,
     }
 }
 
@@ -435,11 +395,7 @@ mod tests {
         }
         let n = out.mask.len();
         let packed = |f: &(dyn Fn(Band<'_>, PackedBand<'_>) + Sync)| {
-            use rayon::prelude::*;
-            let mut to = Unpacked::new(n);
-            to.bands(n).for_each(|band| f(out.band(0..n), band));
-            // SAFETY: the one band was handed out.
-            unsafe { to.packed(w, h) }
+            made(w, h, n, |_, band| f(out.band(0..n), band))
         };
         let blocks = packed(&|from, to| pack_band_blocks(from, to));
         assert_eq!(blocks, pack(&out));
