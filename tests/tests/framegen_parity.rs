@@ -89,8 +89,24 @@ fn history_and_background_match() {
                 .zip(&b.background)
                 .filter(|(x, y)| x.is_valid() && y.is_valid() && !pos_close(x.pos, y.pos))
                 .count();
+            // Colours are the frame's f16, copied: equal bits, alpha 1.
+            let bg_color = a
+                .background
+                .iter()
+                .zip(&b.background)
+                .filter(|(x, y)| x.is_valid() && y.is_valid() && x.color != y.color)
+                .count();
+            let alpha_one = |t: &&framegen::passes::gffe::background::Texel| {
+                !t.is_valid() || t.color[3] == half::f16::ONE
+            };
+            assert!(
+                a.background
+                    .iter()
+                    .chain(&b.background)
+                    .all(|t| alpha_one(&t))
+            );
             eprintln!(
-                "{scene}: track {track_diff} positions {pos_diff} bg valid {bg_valid} bg pos {bg_pos} of {n}"
+                "{scene}: track {track_diff} positions {pos_diff} bg valid {bg_valid} bg pos {bg_pos} bg colour {bg_color} of {n}"
             );
             // Boundary flips only: at most 0.5 % of the pixels.
             let bound = n / 200 + 2;
@@ -109,6 +125,10 @@ fn history_and_background_match() {
             assert!(
                 bg_pos <= 2 * bound,
                 "{scene}: {bg_pos} background positions differ"
+            );
+            assert!(
+                bg_color <= 2 * bound,
+                "{scene}: {bg_color} background colours differ"
             );
         }
     }

@@ -301,7 +301,7 @@ impl Executor for CpuBackend {
                 texels: &p.background,
             });
         let n = i.state.frame.depth.len();
-        let (h, color) = (&i.state.history, &i.state.color);
+        let (h, color) = (&i.state.history, &i.state.frame.color);
         let (reuse, mut carried) = match i.spare.as_mut() {
             Some(s) => (
                 std::mem::take(&mut s.background),

@@ -224,6 +224,9 @@ struct Ingest {
     counted: bool,
     /// Whether the frame's motion points to `prev` (no gap between them).
     follows: bool,
+    /// The frame's colour as uploaded, `f16` (background collection copies
+    /// it into its texels as it is).
+    uploaded: wgpu::Buffer,
     keys: wgpu::Buffer,
     winners: wgpu::Buffer,
     candidates: wgpu::Buffer,
@@ -776,6 +779,7 @@ impl Executor for GpuBackend {
             prev,
             counted: plan.prev.is_some() && plan.follows && plan.k > 0,
             follows: plan.follows,
+            uploaded: s.uploaded.clone().expect("made by this upload"),
             keys: ensure(ctx, pool, &mut s.keys, "keys", slots).clone(),
             winners: ensure(ctx, pool, &mut s.winners, "winners", slots).clone(),
             candidates: ensure(ctx, pool, &mut s.candidates, "candidates", sources).clone(),
@@ -819,7 +823,7 @@ impl Executor for GpuBackend {
                 &plan.camera,
                 &b.positions,
                 &b.track,
-                &b.color,
+                &i.uploaded,
                 plan.levels,
                 i.prev
                     .as_ref()

@@ -123,3 +123,51 @@ const BACKGROUND_MASK: u32 = 2u;
 const FILLED_MASK: u32 = 3u;
 const COPIED_MASK: u32 = 4u;
 const CRACK_MASK: u32 = 5u;
+
+// The f16 in the low 16 bits of `h` as an f32, exactly: normal values by
+// moving the bits, subnormals as a multiple of 2^-24 (an exact product),
+// ±inf and NaN kept (sanitised colour has none). Without branches: the
+// lanes of a software rasteriser's SIMD loop stay together.
+fn half_to_f32(h: u32) -> f32 {
+    let sign = (h & 0x8000u) << 16u;
+    let e = (h >> 10u) & 0x1fu;
+    let m = h & 0x3ffu;
+    let subnormal = bitcast<u32>(ldexp(f32(m), -24));
+    let normal = select((e + 112u) << 23u, 0x7f800000u, e == 31u) | (m << 13u);
+    return bitcast<f32>(sign | select(normal, subnormal, e == 0u));
+}
+
+// Four f16 packed as two words (an `[f16; 4]`, little-endian) as f32,
+// exactly (`half_to_f32`).
+fn half4_to_f32(h: vec2<u32>) -> vec4<f32> {
+    return vec4<f32>(
+        half_to_f32(h.x & 0xffffu),
+        half_to_f32(h.x >> 16u),
+        half_to_f32(h.y & 0xffffu),
+        half_to_f32(h.y >> 16u),
+    );
+}
+
+// A background fragment (`background.rs` `Texel`, 24 bytes), read by
+// background collection and background fill: its position, then its
+// colour as the rendered frame's four f16 (alpha 1 = valid, 0 = empty, so a
+// cleared buffer is empty).
+struct BgTexel {
+    pos_xy: vec2<f32>,
+    pos_zw: vec2<f32>,
+    color: vec2<u32>,
+};
+
+fn bg_texel(p: vec4<f32>, color: vec2<u32>) -> BgTexel {
+    return BgTexel(p.xy, p.zw, color);
+}
+
+fn bg_pos(t: BgTexel) -> vec4<f32> {
+    return vec4<f32>(t.pos_xy, t.pos_zw);
+}
+
+// Whether the slot holds a fragment: its alpha (the high half of the
+// second word) is not 0.
+fn bg_valid(t: BgTexel) -> bool {
+    return (t.color.y >> 16u) != 0u;
+}

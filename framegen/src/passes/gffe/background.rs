@@ -27,6 +27,7 @@
 //! A change of `L` or of the frame size drops the previous buffer.
 
 use glam::{Vec2, Vec3, Vec4};
+use half::f16;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::{PassCamera, rebase};
@@ -38,20 +39,33 @@ use crate::passes::gffe::history::{is_confirmed, is_dynamic};
 /// Most background levels.
 pub const MAX_LEVELS: u32 = 4;
 
-/// One background fragment (WGSL `BgTexel`).
+/// One background fragment (WGSL `BgTexel`), 24 bytes.
+///
+/// Its colour is the rendered frame's own `f16` (`input::Prepared`), copied
+/// bit for bit: the passes' `f32` colour is that `f16` widened, exactly, so
+/// nothing is lost, and a texel is 24 bytes instead of 32. Every frame
+/// writes a frame's worth of them (level 0) and the next reads them all
+/// back (720p: 8 MB less each way).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Texel {
     /// Position (or direction) relative to the current camera centre.
     pub pos: [f32; 4],
     /// Linear RGB; alpha 1 = valid, 0 = empty (so a cleared buffer is empty).
-    pub color: [f32; 4],
+    pub color: [f16; 4],
 }
 
 impl Texel {
-    /// Whether the slot holds a fragment.
+    /// Whether the slot holds a fragment (WGSL `bg_valid`: its alpha's
+    /// bits are not 0).
     pub fn is_valid(&self) -> bool {
-        self.color[3] > 0.5
+        self.color[3].to_bits() != 0
+    }
+
+    /// Its colour as the passes take it: the `f16` widened (exact), alpha 1.
+    pub fn rgb1(&self) -> [f32; 4] {
+        let [r, g, b, _] = self.color;
+        [r.to_f32(), g.to_f32(), b.to_f32(), 1.0]
     }
 }
 
@@ -95,7 +109,7 @@ fn init(
                 let c = color[x];
                 Texel {
                     pos: p0[x],
-                    color: [c[0], c[1], c[2], 1.0],
+                    color: [c[0], c[1], c[2], f16::ONE],
                 }
             } else {
                 Texel::default()
@@ -303,8 +317,8 @@ pub struct Seeds<'a> {
     pub p0: &'a [[f32; 4]],
     /// Its track words.
     pub track: &'a [u32],
-    /// Its colour.
-    pub color: &'a [[f32; 4]],
+    /// Its colour, as the frame's own `f16` (`input::Prepared`).
+    pub color: &'a [[f16; 4]],
 }
 
 /// CPU reference of the whole collection for one rendered frame, into
@@ -432,7 +446,8 @@ impl GpuBackground {
         }
     }
 
-    /// Records the collection. `bg` receives the new buffer (`levels`);
+    /// Records the collection. `color` is the rendered frame's as uploaded
+    /// (four `f16` a pixel); `bg` receives the new buffer (`levels`);
     /// `keys`, `winners` and `candidates` are scratch of at least
     /// `levels.total()` / previous level-0 length elements.
     #[allow(clippy::too_many_arguments)]
@@ -536,7 +551,12 @@ mod tests {
                 }
                 Texel {
                     pos,
-                    color: [1.0, 1.0, 1.0, if held { 1.0 } else { 0.0 }],
+                    color: [
+                        f16::ONE,
+                        f16::ONE,
+                        f16::ONE,
+                        if held { f16::ONE } else { f16::ZERO },
+                    ],
                 }
             })
             .collect();
@@ -562,7 +582,7 @@ mod tests {
                 let valid = i % 13 != 0;
                 Texel {
                     pos,
-                    color: [0.5, 0.5, 0.5, if valid { 1.0 } else { 0.0 }],
+                    color: [f16::from_f32(0.5); 4].map(|c| if valid { c } else { f16::ZERO }),
                 }
             })
             .collect();
@@ -591,7 +611,7 @@ mod tests {
     /// Level 0's held depths are what its texels hold, as the current
     /// camera sees them: none where a slot is empty (a NaN position
     /// included), a NaN where a held fragment has no depth, never read as
-    /// empty.
+    /// empty. Its seeds' colours are the frame's, exactly, alpha 1.
     #[test]
     fn held_depths_are_what_level_0_holds() {
         let eye = [0.0, 1.0, 3.0];
@@ -613,7 +633,24 @@ mod tests {
                 _ => 2, // static, confirmed (`history::is_confirmed`)
             })
             .collect();
-        let color = vec![[0.5, 0.25, 1.0, 1.0]; n];
+        // Colours as prepared frames hold them: subnormal, largest,
+        // zero, ordinary; alpha anything (a seed's is 1).
+        let color: Vec<[f16; 4]> = (0..n)
+            .map(|i| {
+                let c = [0.5, 0.25, 1.0, 0.0].map(f16::from_f32);
+                match i % 4 {
+                    0 => [
+                        f16::from_bits(1),
+                        f16::MIN_POSITIVE_SUBNORMAL,
+                        f16::MAX,
+                        c[3],
+                    ],
+                    1 => [f16::ZERO, f16::from_bits(0x03ff), c[1], f16::ONE],
+                    _ => c,
+                }
+            })
+            .collect();
+        let widened = crate::passes::common::widen::widen(&color);
         let from = Seeds {
             p0: &p0,
             track: &track,
@@ -624,6 +661,11 @@ mod tests {
         let mut kinds = [0usize; 3];
         for (x, (t, h)) in bg.iter().zip(&held).enumerate() {
             assert_eq!(t.is_valid(), seeds(track[x]));
+            // A seed's colour, as the passes take it, is the frame's.
+            if t.is_valid() {
+                let [r, g, b, _] = widened[x];
+                assert_eq!(t.rgb1().map(f32::to_bits), [r, g, b, 1.0].map(f32::to_bits));
+            }
             let kind = match h.depth() {
                 None => 0,
                 Some(d) if d.is_nan() => 1,

@@ -1,10 +1,5 @@
 // GFFE §4.2 layered background collection. See `background.rs`.
 
-struct BgTexel {
-    pos: vec4<f32>,
-    color: vec4<f32>,
-};
-
 struct BgParams {
     camera: Cam,
     shift: vec4<f32>,
@@ -17,7 +12,8 @@ struct BgParams {
 @group(0) @binding(0) var<storage, read> bp: BgParams;
 @group(0) @binding(1) var<storage, read> positions: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> track: array<u32>;
-@group(0) @binding(3) var<storage, read> color: array<vec4<f32>>;
+// The rendered frame's colour as uploaded: four f16 a pixel.
+@group(0) @binding(3) var<storage, read> color: array<vec2<u32>>;
 @group(0) @binding(4) var<storage, read> prev_bg: array<BgTexel>;
 @group(0) @binding(5) var<storage, read_write> bg: array<BgTexel>;
 @group(0) @binding(6) var<storage, read> keys: array<u32>;
@@ -32,7 +28,9 @@ fn bg_init(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     }
     let p = positions[x];
     if (track[x] & 3u) == 2u && p.w != W_INVALID {
-        bg[x] = BgTexel(p, vec4<f32>(color[x].xyz, 1.0));
+        // Its f16 bits as they are, alpha 1 (0x3c00).
+        let c = color[x];
+        bg[x] = bg_texel(p, vec2<u32>(c.x, (c.y & 0xffffu) | (0x3c00u << 16u)));
     }
 }
 
@@ -52,15 +50,15 @@ fn bg_project(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
     var out = vec2<u32>(NONE, 0u);
     let t = prev_bg[bp.prev.x + i];
     let l = bp.config.y;
-    if t.color.w > 0.5 {
-        let r = project(bp.camera, rebased(t.pos));
+    if bg_valid(t) {
+        let r = project(bp.camera, rebased(bg_pos(t)));
         if r.ok {
             let s = cell(r.pixel, bp.level.y, bp.level.z, f32(1u << l));
             if s != NONE {
                 let here = bg[bp.level.x + s];
-                if here.color.w <= 0.5 {
+                if !bg_valid(here) {
                     out = vec2<u32>(bp.level.x + s, depth_key(r.depth));
-                } else if bp.next.w == 1u && r.depth > depth_of(bp.camera, here.pos) * (1.0 + bp.shift.w) {
+                } else if bp.next.w == 1u && r.depth > depth_of(bp.camera, bg_pos(here)) * (1.0 + bp.shift.w) {
                     let s1 = cell(r.pixel, bp.next.y, bp.next.z, f32(1u << (l + 1u)));
                     if s1 != NONE {
                         out = vec2<u32>(bp.next.x + s1, depth_key(r.depth));
@@ -83,5 +81,5 @@ fn bg_resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
         return;
     }
     let t = prev_bg[bp.prev.x + ~stored];
-    bg[s] = BgTexel(rebased(t.pos), t.color);
+    bg[s] = bg_texel(rebased(bg_pos(t)), t.color);
 }

@@ -128,12 +128,11 @@ pub fn resolve(
             return;
         };
         let texel = bg[i];
-        let c = texel.color;
         let motion = current
             .project(texel.pos)
             .map(|r| map.apply(r.pixel) - center)
             .unwrap_or(Vec2::ZERO);
-        *px.color = [c[0], c[1], c[2], 1.0];
+        *px.color = texel.rgb1();
         *px.depth = d;
         *px.motion = motion.to_array();
         *px.mask = BACKGROUND;

@@ -1,10 +1,5 @@
 // Background projection into the holes of a generated frame. See `bgfill.rs`.
 
-struct BgTexel {
-    pos: vec4<f32>,
-    color: vec4<f32>,
-};
-
 struct FillParams {
     view: Cam,
     current: Cam,
@@ -54,14 +49,14 @@ fn bgfill_project(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups
         return;
     }
     let t = bg[i];
-    if t.color.w > 0.5 {
+    if bg_valid(t) {
         var l = 0u;
         for (var j = 1u; j < fp.config.x; j++) {
             if i >= fp.source_offsets[j] {
                 l = j;
             }
         }
-        let r = project(fp.view, t.pos);
+        let r = project(fp.view, bg_pos(t));
         if r.ok {
             let s = cell(r.pixel, fp.target_widths[l], fp.target_heights[l], f32(1u << l));
             if s != NONE {
@@ -100,11 +95,11 @@ fn bgfill_resolve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups
     }
     let texel = bg[best];
     var motion = vec2<f32>(0.0);
-    let r = project(fp.current, texel.pos);
+    let r = project(fp.current, bg_pos(texel));
     if r.ok {
         motion = (r.pixel - fp.map.xy) * fp.map.zw - center;
     }
-    out_color[t] = vec4<f32>(texel.color.xyz, 1.0);
+    out_color[t] = vec4<f32>(half4_to_f32(texel.color).xyz, 1.0);
     out_depth[t] = key_depth(best_key);
     out_motion[t] = motion;
     out_mask[t] = BACKGROUND_MASK;
