@@ -96,9 +96,12 @@ fn cpu_output_is_the_same_for_any_thread_count() {
 fn recycled_buffers_leave_no_trace() {
     use framegen::passes::common::camera::PassCamera;
     use framegen::passes::common::levels::Levels;
-    use framegen::passes::gffe::background::{self, PrevBackground, Seeds, Texel};
+    use framegen::passes::common::splat::Sparse;
+    use framegen::passes::gffe::background::{self, PrevBackground, Seeds, Texel, Work};
     use framegen::passes::gffe::history::{self, History, PrevHistory, Tracker};
     let bits = |v: &[[f32; 4]]| -> Vec<u32> { v.iter().flatten().map(|x| x.to_bits()).collect() };
+    // One set of splat slots for every collection: each leaves them empty.
+    let mut slots = Sparse::default();
     let all = tests::render_scene("crossing", SIZE, 60.0, 30..34);
     let frames = framegen::decimate::decimate(&all, 2);
     let (a, b) = (&frames[0], &frames[1]);
@@ -123,7 +126,10 @@ fn recycled_buffers_leave_no_trace() {
         levels,
         None,
         tol,
-        &mut Vec::new(),
+        Work {
+            carried: &mut Vec::new(),
+            slots: &mut slots,
+        },
     );
     let origin = b.meta.camera.pose.position;
     let cam_b = PassCamera::new(&b.meta.camera, b.meta.size, origin);
@@ -191,7 +197,7 @@ fn recycled_buffers_leave_no_trace() {
         pos: [3.0, f32::NAN, 1.0, 1.0],
         color: [9.0, 9.0, 9.0, 1.0].map(half::f16::from_f32),
     };
-    let collect = |reuse| {
+    let mut collect = |reuse| {
         background::collect(
             reuse,
             &cam_b,
@@ -199,7 +205,10 @@ fn recycled_buffers_leave_no_trace() {
             levels,
             Some(prev_bg),
             tol,
-            &mut Vec::new(),
+            Work {
+                carried: &mut Vec::new(),
+                slots: &mut slots,
+            },
         )
     };
     let clean = collect(Vec::new());
@@ -230,9 +239,16 @@ fn recycled_buffers_leave_no_trace() {
         levels,
         prev,
         tol,
-        &mut Vec::new(),
+        Work {
+            carried: &mut Vec::new(),
+            slots: &mut slots,
+        },
     );
-    let listed = background::collect(reuse, &cam_b, seeds_b, levels, prev, tol, &mut carried);
+    let work = Work {
+        carried: &mut carried,
+        slots: &mut slots,
+    };
+    let listed = background::collect(reuse, &cam_b, seeds_b, levels, prev, tol, work);
     assert_eq!(
         bytemuck::cast_slice::<_, u32>(&listed),
         bytemuck::cast_slice::<_, u32>(&clean)

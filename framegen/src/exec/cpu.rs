@@ -98,6 +98,8 @@ pub struct CpuBackend {
     undo: Vec<(u32, [f32; 4])>,
     /// Push-pull's maps of the texels it made, kept between frames.
     holes: pushpull::Scratch,
+    /// Background collection's splat slots, empty between frames.
+    bg_slots: splat::Sparse,
 }
 
 fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
@@ -292,6 +294,7 @@ impl Executor for CpuBackend {
 
     fn background(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
         let i = ingesting(&mut self.ingest)?;
+        let slots = &mut self.bg_slots;
         let prev = i
             .prev
             .as_ref()
@@ -317,7 +320,11 @@ impl Executor for CpuBackend {
             };
             let (levels, tolerance) = (plan.levels, plan.tolerance);
             let camera = &plan.camera;
-            background::collect(reuse, camera, seeds, levels, prev, tolerance, &mut carried)
+            let work = background::Work {
+                carried: &mut carried,
+                slots,
+            };
+            background::collect(reuse, camera, seeds, levels, prev, tolerance, work)
         });
         i.state.carried = carried;
         Ok(())

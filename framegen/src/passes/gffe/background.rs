@@ -310,6 +310,15 @@ fn candidates4_in(
     })
 }
 
+/// What [`collect`] writes besides the texels, and where it splats.
+#[derive(Debug)]
+pub struct Work<'a> {
+    /// The slots of the fragments carried over (see [`collect`]).
+    pub carried: &'a mut Vec<u32>,
+    /// The splat's slots, kept from frame to frame.
+    pub slots: &'a mut splat::Sparse,
+}
+
 /// What the rendered frame seeds level 0 with (step 1).
 #[derive(Clone, Copy, Debug)]
 pub struct Seeds<'a> {
@@ -325,12 +334,13 @@ pub struct Seeds<'a> {
 /// `reuse` where its size fits (a background no longer needed; every texel
 /// is written). `camera` is `C_t` (centre at the origin).
 ///
-/// Also lists in `carried` (cleared first) the slots of the fragments it
-/// carried over from the previous background, ascending: every valid
-/// texel that is not a seed of this frame, the only ones background fill
-/// can fill a hole with (`background::seeds`). At 720p a few thousand of
-/// 1.2 M slots, which the CPU executor's background fill then projects
-/// instead of reading every texel.
+/// Also lists in `work.carried` (cleared first) the slots of the
+/// fragments it carried over from the previous background, ascending:
+/// every valid texel that is not a seed of this frame, the only ones
+/// background fill can fill a hole with (`background::seeds`). At 720p a
+/// few thousand of 1.2 M slots, which the CPU executor's background fill
+/// then projects instead of reading every texel. Its splats take
+/// `work.slots` ([`splat::Sparse`]: few of the previous fragments land).
 pub fn collect(
     reuse: Vec<Texel>,
     camera: &PassCamera,
@@ -338,8 +348,9 @@ pub fn collect(
     levels: Levels,
     prev: Option<PrevBackground<'_>>,
     tolerance: f32,
-    carried: &mut Vec<u32>,
+    work: Work<'_>,
 ) -> Vec<Texel> {
+    let Work { carried, slots } = work;
     carried.clear();
     let (mut bg, level0) = init(reuse, from, levels, camera);
     let Some(prev) = prev.filter(|p| p.levels.count == levels.count) else {
@@ -361,30 +372,33 @@ pub fn collect(
             _ => Current::Texels(&bg, camera),
         };
         let grids = (here, next);
-        let winners =
-            splat::resolve_lanes(source.len(), begin as usize..end as usize, |i| match source
-                .get(i..)
-                .and_then(|s| s.first_chunk())
-            {
+        // Few land (most previous fragments meet the same surface again):
+        // the sparse splat.
+        let range = begin as usize..end as usize;
+        let won = slots.resolve(source.len(), range.clone(), |i| {
+            match source.get(i..).and_then(|s| s.first_chunk()) {
                 Some(t) => candidates4_in(t, shift, camera, current, grids, tolerance),
                 None => std::array::from_fn(|k| match source.get(i + k) {
                     Some(t) => candidate_in(t, shift, camera, current, grids, tolerance),
                     None => Candidate::MISS,
                 }),
-            });
-        let written: Vec<u32> = bg[begin as usize..end as usize]
-            .par_iter_mut()
-            .zip(begin..end)
-            .filter_map(|(texel, s)| {
-                let t = source[winners.winner(s as usize)?];
-                *texel = Texel {
+            }
+        });
+        // Each won slot from its fragment, by blocks of slots (`won` is
+        // ascending).
+        const BLOCK: usize = 16 * 1024;
+        (bg[range].par_chunks_mut(BLOCK).enumerate()).for_each(|(b, block)| {
+            let first = begin as usize + b * BLOCK;
+            let from = |s: usize| won.partition_point(|&(w, _)| (w as usize) < s);
+            for &(s, i) in &won[from(first)..from(first + block.len())] {
+                let t = source[i as usize];
+                block[s as usize - first] = Texel {
                     pos: rebase(t.pos, shift),
                     color: t.color,
                 };
-                Some(s)
-            })
-            .collect();
-        carried.extend(written);
+            }
+        });
+        carried.extend(won.iter().map(|&(s, _)| s));
     }
     // A slot of level l + 1 written again by level l + 1's own step is
     // listed twice.
