@@ -674,6 +674,7 @@ fn ratio_bilinear(ratio: &[[f32; 2]], size: (u32, u32), x: f32, y: f32) -> f32 {
 /// interval's `r_t(y − f)`: a fraction of an interval changes a pixel
 /// less than all of it does, and a pixel the band has already passed not
 /// at all.
+#[inline]
 pub fn predict(
     ratio: &[[f32; 2]],
     size: (u32, u32),
@@ -752,29 +753,36 @@ pub fn changes(e: &Estimate<'_>, alpha: f32) -> Option<Vec<(u32, [f32; 4])>> {
     let (w, h) = e.size;
     let (bw, bh) = blocks(w, h);
     let lenders: Vec<(u32, [f32; 4])> = (0..bw * bh)
+        .into_par_iter()
         .filter_map(|b| lender(e.flow, e.size, (b % bw) as i32, (b / bw) as i32).map(|f| (b, f)))
         .collect();
     if lenders.is_empty() {
         return None;
     }
-    let changed = lenders
+    // Block by block, in plain loops.
+    let lists: Vec<Vec<(u32, [f32; 4])>> = lenders
         .par_iter()
-        .flat_map_iter(|&(b, f)| {
+        .fold(Vec::new, |mut changed, &(b, f)| {
             let (x0, y0) = ((b % bw) * BLOCK, (b / bw) * BLOCK);
             let (x1, y1) = ((x0 + BLOCK).min(w), (y0 + BLOCK).min(h));
-            (y0..y1)
-                .flat_map(move |py| (x0..x1).map(move |px| (px, py)))
-                .filter_map(move |(px, py)| {
-                    let i = py * w + px;
-                    let (c, t) = (e.color[i as usize], e.track[i as usize]);
-                    if is_dynamic(t) {
-                        return None;
+            for py in y0..y1 {
+                let row = (py * w) as usize;
+                for px in x0..x1 {
+                    let i = row + px as usize;
+                    if is_dynamic(e.track[i]) {
+                        continue;
                     }
+                    let c = e.color[i];
                     let o = apply(c, predict(e.ratio, e.size, px, py, [f[0], f[1]], alpha));
-                    (o.map(f32::to_bits) != c.map(f32::to_bits)).then_some((i, o))
-                })
+                    if o.map(f32::to_bits) != c.map(f32::to_bits) {
+                        changed.push((i as u32, o));
+                    }
+                }
+            }
+            changed
         })
         .collect();
+    let changed: Vec<(u32, [f32; 4])> = lists.concat();
     Some(changed)
 }
 
