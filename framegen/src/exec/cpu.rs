@@ -98,8 +98,9 @@ pub struct CpuBackend {
     undo: Vec<(u32, [f32; 4])>,
     /// Push-pull's maps of the texels it made, kept between frames.
     holes: pushpull::Scratch,
-    /// Background collection's splat slots, empty between frames.
-    bg_slots: splat::Sparse,
+    /// The splat slots of background collection and background fill,
+    /// empty between passes.
+    sparse: splat::Sparse,
 }
 
 fn timed<T>(timings: &mut Vec<PassTime>, pass: Pass, f: impl FnOnce() -> T) -> T {
@@ -294,7 +295,7 @@ impl Executor for CpuBackend {
 
     fn background(&mut self, plan: &IngestPlan) -> Result<(), FramegenError> {
         let i = ingesting(&mut self.ingest)?;
-        let slots = &mut self.bg_slots;
+        let slots = &mut self.sparse;
         let prev = i
             .prev
             .as_ref()
@@ -554,9 +555,10 @@ impl Executor for CpuBackend {
     }
 
     fn bgfill(&mut self, job: &Job) -> Result<(), FramegenError> {
-        let (cur, out, t) = self.parts()?;
-        let out = Self::output(out)?;
-        timed(t, Pass::BgFill, || {
+        let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
+        let out = Self::output(&mut self.out)?;
+        let sparse = &mut self.sparse;
+        timed(&mut self.timings, Pass::BgFill, || {
             let (bg, camera) = (&cur.background, &cur.camera);
             let slots = 0..job.bg_target.total() as usize;
             // Only the fragments carried over from earlier frames can fill
@@ -564,10 +566,11 @@ impl Executor for CpuBackend {
             // frame's static pixels, which land where the warp already
             // wrote (`background::seeds`).
             let layout = bgfill::Layout::new(cur.levels, job.bg_target);
-            let winners = splat::resolve_listed(&cur.carried, slots, |i| {
+            let won = sparse.take_listed(&cur.carried, slots, |i| {
                 bgfill::candidate(i, &bg[i], &job.target, &layout)
             });
-            bgfill::resolve(&winners, bg, job.bg_target, camera, job.map, out);
+            let won = |slot| won.get(slot);
+            bgfill::resolve_won(won, bg, job.bg_target, camera, job.map, out);
         });
         Ok(())
     }

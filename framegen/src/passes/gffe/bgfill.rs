@@ -104,6 +104,21 @@ pub fn resolve(
     map: DisplayMap,
     out: &mut Output,
 ) {
+    let won = |slot| winners.depth(slot).zip(winners.winner(slot));
+    resolve_won(won, bg, target, current, map, out);
+}
+
+/// [`resolve`] with each slot's winner given by `won`, `(depth, index)`
+/// (the CPU executor's splat leaves them in slots of its own:
+/// `splat::Sparse::take_listed`).
+pub fn resolve_won(
+    won: impl Fn(usize) -> Option<(f32, usize)> + Sync,
+    bg: &[Texel],
+    target: Levels,
+    current: &PassCamera,
+    map: DisplayMap,
+    out: &mut Output,
+) {
     use rayon::prelude::*;
     let width = out.width;
     let grids: Vec<Grid> = (0..target.count).map(|l| target.grid(l)).collect();
@@ -118,7 +133,7 @@ pub fn resolve(
                 continue;
             };
             let slot = slot as usize;
-            if let (Some(i), Some(d)) = (winners.winner(slot), winners.depth(slot))
+            if let Some((d, i)) = won(slot)
                 && best.is_none_or(|(bd, _)| d < bd)
             {
                 best = Some((d, i));
