@@ -80,7 +80,8 @@ impl Planes {
             .zip(self.green.par_chunks_mut(block))
             .zip(self.blue.par_chunks_mut(block))
             .zip(other.par_chunks_mut(block))
-            .enumerate();
+            .enumerate()
+            .with_max_len((64 * 1024 / block).max(1));
         self.opaque = planes
             .map(|(k, (((r, g), b), o))| make(k * block, o, r, g, b))
             .reduce(|| true, |a, b| a & b);

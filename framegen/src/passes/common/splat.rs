@@ -240,6 +240,7 @@ pub fn resolve_lanes(
         let band = count.div_ceil(bands).max(MIN_BAND).next_multiple_of(LANES);
         let elsewhere: Vec<Vec<(usize, Candidate)>> = (0..count.div_ceil(band))
             .into_par_iter()
+            .with_max_len(1)
             .map(|b| {
                 let own = b * band..((b + 1) * band).min(count);
                 let mut elsewhere = Vec::new();
@@ -269,6 +270,7 @@ pub fn resolve_lanes(
         (0..groups)
             .into_par_iter()
             .with_min_len(1024)
+            .with_max_len(4096)
             .for_each(|g| {
                 let first = g * LANES;
                 for (i, c) in (first..count).zip(candidates(first)) {
@@ -333,6 +335,7 @@ impl Sparse {
         let block = Self::BLOCK;
         let landed: Vec<Option<Vec<(u32, u64)>>> = (0..count.div_ceil(block))
             .into_par_iter()
+            .with_max_len(1)
             .map(|b| {
                 let mut listed = Vec::new();
                 let mut all = true;

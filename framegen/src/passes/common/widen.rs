@@ -34,6 +34,7 @@ pub fn widen_into(color: &[[f16; 4]], reuse: Vec<[f32; 4]>) -> Vec<[f32; 4]> {
     }
     out.par_chunks_mut(CONVERT_BLOCK)
         .zip(color.par_chunks(CONVERT_BLOCK))
+        .with_max_len(16)
         .for_each(|(dst, src)| {
             src.as_flattened()
                 .convert_to_f32_slice(dst.as_flattened_mut())

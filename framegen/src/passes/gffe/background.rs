@@ -104,6 +104,7 @@ fn init(
     level0
         .par_iter_mut()
         .enumerate()
+        .with_max_len(16 * 1024)
         .map(|(x, slot)| {
             *slot = if seeds(track[x]) {
                 let c = color[x];

@@ -203,6 +203,7 @@ impl Tracker<'_> {
         let width = (self.camera.width() as usize).max(1);
         let dynamic = bands
             .into_par_iter()
+            .with_max_len(1)
             .map(|(start, mut planes, words)| {
                 let mut dynamic = 0;
                 let mut entries = [invalid; MAX_HISTORY];

@@ -333,6 +333,7 @@ pub fn ratio_into(
     out.par_chunks_mut(w)
         .zip(luma.par_chunks_mut(w))
         .enumerate()
+        .with_max_len(8)
         .for_each(|(py, (row, luma))| {
             if runs {
                 for (k, (row, luma)) in row.chunks_mut(RUN).zip(luma.chunks_mut(RUN)).enumerate() {
@@ -589,6 +590,7 @@ pub fn flow_into(ratio: &[[f32; 2]], size: (u32, u32), out: &mut Vec<[f32; 4]>) 
     out.par_extend(
         (0..(bw * bh) as usize)
             .into_par_iter()
+            .with_max_len(64)
             .map(|b| flow_block(b, ratio, size)),
     );
 }
