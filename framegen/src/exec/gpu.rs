@@ -745,20 +745,21 @@ impl Executor for GpuBackend {
             &mut s.uploaded,
             "uploaded color",
             color_bytes,
-        );
+        )
+        .clone();
         let encoder = self
             .rec
             .encoder
             .get_or_insert_with(|| ctx.device.create_command_encoder(&Default::default()));
         let staging = s.upload.as_ref().expect("allocated above");
-        encoder.copy_buffer_to_buffer(staging, 0, uploaded, 0, color_bytes);
+        encoder.copy_buffer_to_buffer(staging, 0, &uploaded, 0, color_bytes);
         encoder.copy_buffer_to_buffer(staging, color_bytes, &buffers.depth, 0, depth_bytes);
         let offset = color_bytes + depth_bytes;
         encoder.copy_buffer_to_buffer(staging, offset, &buffers.motion, 0, motion_bytes);
         let rec = Rec::new(ctx, &self.rec.pool);
         self.kernels
             .widen
-            .encode(&rec, encoder, n, uploaded, &buffers.color);
+            .encode(&rec, encoder, n, &uploaded, &buffers.color);
         if self.rec.profile {
             self.rec.flush(ctx)?;
             self.rec.timings.push(PassTime {
@@ -779,7 +780,7 @@ impl Executor for GpuBackend {
             prev,
             counted: plan.prev.is_some() && plan.follows && plan.k > 0,
             follows: plan.follows,
-            uploaded: s.uploaded.clone().expect("made by this upload"),
+            uploaded,
             keys: ensure(ctx, pool, &mut s.keys, "keys", slots).clone(),
             winners: ensure(ctx, pool, &mut s.winners, "winners", slots).clone(),
             candidates: ensure(ctx, pool, &mut s.candidates, "candidates", sources).clone(),

@@ -157,6 +157,12 @@ pub fn resolve_listed(
     slots.winners()
 }
 
+/// Where `slot` is in the `len` slots from `start`, if it is.
+#[inline]
+fn within(start: usize, len: usize, slot: usize) -> Option<usize> {
+    slot.checked_sub(start).filter(|&s| s < len)
+}
+
 /// The packed words of a range of slots as the atomic maximum of each
 /// builds them ([`resolve_lanes`], [`resolve_listed`]).
 struct Slots {
@@ -187,9 +193,7 @@ impl Slots {
     /// Index of the slot `c` lands in, if it is in the range.
     #[inline]
     fn index(&self, c: Candidate) -> Option<usize> {
-        (c.slot as usize)
-            .checked_sub(self.range.start)
-            .filter(|&s| s < self.packed.len())
+        within(self.range.start, self.packed.len(), c.slot as usize)
     }
 
     /// Candidate `i` taken into its slot with the atomic maximum (no write
@@ -324,11 +328,7 @@ impl Sparse {
         use std::sync::atomic::Ordering::Relaxed;
         let len = range.len();
         let packed = self.ready(len);
-        let slot = |c: Candidate| {
-            (c.slot as usize)
-                .checked_sub(range.start)
-                .filter(|&s| s < len)
-        };
+        let slot = |c: Candidate| within(range.start, len, c.slot as usize);
         // The landed candidates, (slot in the range, word), in the order
         // of their indices whatever the split; `None` for a block that
         // had more.
@@ -404,9 +404,7 @@ impl Sparse {
         let packed = self.ready(len);
         let take = |i: u32| {
             let c = candidate(i as usize);
-            let s = (c.slot as usize)
-                .checked_sub(range.start)
-                .filter(|&s| s < len)?;
+            let s = within(range.start, len, c.slot as usize)?;
             let v = Slots::value(i as usize, c);
             if v > packed[s].load(Relaxed) {
                 packed[s].fetch_max(v, Relaxed);
@@ -475,7 +473,7 @@ impl Taken<'_> {
     #[inline]
     pub fn get(&self, slot: usize) -> Option<(f32, usize)> {
         use std::sync::atomic::Ordering::Relaxed;
-        let s = slot.checked_sub(self.start).filter(|&s| s < self.len)?;
+        let s = within(self.start, self.len, slot)?;
         match self.sparse.packed[s].load(Relaxed) {
             0 => None,
             v => Some((key_depth((v >> 32) as u32), !(v as u32) as usize)),
@@ -634,8 +632,8 @@ mod tests {
     }
 
     /// The listed splat finds what the dense one finds over the same
-    /// elements, and so do sparse slots taken from the list (twice on the
-    /// same slots: dropping the answer empties them): over listed
+    /// elements, and so do sparse slots taken from the list (in turn on
+    /// the same slots: dropping the answer empties them): over listed
     /// candidates that miss, land outside the range, tie, and land in the
     /// same slots from far apart.
     #[test]
