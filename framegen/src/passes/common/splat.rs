@@ -376,12 +376,17 @@ impl Sparse {
                 won.par_sort_unstable();
                 won
             }
-            None => (packed.par_iter().enumerate().with_min_len(4096))
-                .filter_map(|(s, v)| match v.swap(0, Relaxed) {
-                    0 => None,
-                    v => Some(((range.start + s) as u32, !(v as u32))),
-                })
-                .collect(),
+            // Nothing else holds the slots now: each read and emptied with
+            // a plain load and store (a swap is a locked instruction).
+            None => {
+                let slots = self.packed[..len].par_iter_mut().enumerate();
+                (slots.with_min_len(4096))
+                    .filter_map(|(s, v)| match std::mem::take(v.get_mut()) {
+                        0 => None,
+                        v => Some(((range.start + s) as u32, !(v as u32))),
+                    })
+                    .collect()
+            }
         };
         self.dirty = false;
         won
@@ -392,40 +397,48 @@ impl Sparse {
     /// does) from them, for a pass that looks its slots up pixel by pixel
     /// (background fill: a few thousand candidates, 1.15 M slots at 720p,
     /// which dense slots cleared and converted each frame, 0.5 ms).
+    ///
+    /// `candidates(ids)` gives the candidates of the elements `ids`,
+    /// [`LANES`] listed ones at a time, for a pass that projects four at
+    /// once (`lanes.rs`); the last `ids` repeat the last element where
+    /// fewer are left (the same word twice takes its slot once).
     pub fn take_listed(
         &mut self,
         elements: &[u32],
         range: std::ops::Range<usize>,
-        candidate: impl Fn(usize) -> Candidate + Sync + Send,
+        candidates: impl Fn([usize; LANES]) -> [Candidate; LANES] + Sync + Send,
     ) -> Taken<'_> {
         use rayon::prelude::*;
         use std::sync::atomic::Ordering::Relaxed;
         let len = range.len();
         let packed = self.ready(len);
-        let take = |i: u32| {
-            let c = candidate(i as usize);
-            let s = within(range.start, len, c.slot as usize)?;
-            let v = Slots::value(i as usize, c);
-            if v > packed[s].load(Relaxed) {
-                packed[s].fetch_max(v, Relaxed);
+        let take = |ids: &[u32], landed: &mut dyn FnMut(u32)| {
+            let ids = std::array::from_fn(|k| ids[k.min(ids.len() - 1)] as usize);
+            for (i, c) in ids.into_iter().zip(candidates(ids)) {
+                if let Some(s) = within(range.start, len, c.slot as usize) {
+                    let v = Slots::value(i, c);
+                    if v > packed[s].load(Relaxed) {
+                        packed[s].fetch_max(v, Relaxed);
+                    }
+                    landed(s as u32);
+                }
             }
-            Some(s as u32)
         };
-        let elements = elements.par_iter().with_min_len(1024);
+        let groups = elements.par_chunks(LANES).with_min_len(256);
         // Where many are listed (after a restart of the history, the
         // whole previous background), the slots are emptied whole, as
         // dense slots are made, rather than one by one.
         let landed: Option<Vec<Vec<u32>>> = match elements.len() <= len / 8 {
             true => Some(
-                elements
-                    .fold(Vec::new, |mut listed, &i| {
-                        listed.extend(take(i));
+                groups
+                    .fold(Vec::new, |mut listed, ids| {
+                        take(ids, &mut |s| listed.push(s));
                         listed
                     })
                     .collect(),
             ),
             false => {
-                elements.for_each(|&i| _ = take(i));
+                groups.for_each(|ids| take(ids, &mut |_| ()));
                 None
             }
         };
@@ -669,7 +682,8 @@ mod tests {
         // are emptied whole, then listed again.
         for range in [0..60_000, 100..120, 90..60_000] {
             let dense = resolve_with(n, range.clone(), only);
-            let taken = sparse.take_listed(&elements, range.clone(), candidate);
+            let four = |ids: [usize; LANES]| ids.map(candidate);
+            let taken = sparse.take_listed(&elements, range.clone(), four);
             for s in 0..60_100 {
                 let expected = dense.depth(s).zip(dense.winner(s));
                 assert_eq!(taken.get(s), expected, "slot {s}");

@@ -14,6 +14,7 @@ use glam::Vec2;
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::output::{BACKGROUND, DisplayMap, EMPTY, Output};
 use crate::passes::common::camera::{PassCamera, pixel_center};
+use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 use crate::passes::common::levels::{Grid, Levels};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
 use crate::passes::gffe::background::{MAX_LEVELS, Texel};
@@ -68,8 +69,13 @@ impl Layout {
     /// level.
     #[inline]
     fn level_of(&self, i: u32) -> Option<&Grid> {
-        let l = self.ends[..self.count].iter().position(|&end| i < end)?;
-        Some(&self.grids[l])
+        Some(&self.grids[self.level(i)?])
+    }
+
+    /// The level of texel `i`; `None` past the last level.
+    #[inline]
+    fn level(&self, i: u32) -> Option<usize> {
+        self.ends[..self.count].iter().position(|&end| i < end)
     }
 }
 
@@ -92,6 +98,35 @@ pub fn candidate(i: usize, t: &Texel, camera: &PassCamera, layout: &Layout) -> C
             })
         })
         .unwrap_or(Candidate::MISS)
+}
+
+/// [`candidate`] of texels `ids`, projected in lanes (`lanes.rs`: the same
+/// bits) where all four are of one level, as the texels a pass lists
+/// mostly are (background fill: the carried ones, ascending); one by one
+/// otherwise.
+#[inline]
+pub fn candidates4(
+    ids: [usize; LANES],
+    bg: &[Texel],
+    camera: &PassCamera,
+    layout: &Layout,
+) -> [Candidate; LANES] {
+    let level = layout.level(ids[0] as u32);
+    let one_level = ids[1..].iter().all(|&i| layout.level(i as u32) == level);
+    let Some(grid) = level.filter(|_| one_level).map(|l| layout.grids[l]) else {
+        return ids.map(|i| candidate(i, &bg[i], camera, layout));
+    };
+    let t = ids.map(|i| bg[i]);
+    let (p, w) = Lanes3::from_positions(&t.map(|t| t.pos));
+    let r = project4(camera, p, w);
+    let cells = cells4(&r, grid.width, grid.height, grid.scale);
+    std::array::from_fn(|l| match cells[l] {
+        Some(cell) if t[l].is_valid() => Candidate {
+            slot: grid.offset + cell,
+            key: depth_key(r.depth[l]),
+        },
+        _ => Candidate::MISS,
+    })
 }
 
 /// CPU reference of `bgfill_resolve`: fills the holes of `out`. `current`
@@ -288,6 +323,7 @@ impl GpuBgFill {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use half::f16;
 
     /// The per-frame layout puts every texel in the level `Levels` says,
     /// with that level's target grid, for every level count the settings
@@ -307,6 +343,66 @@ mod tests {
                 );
             }
             assert_eq!(layout.level_of(source.total()), None, "count {count}");
+        }
+    }
+
+    /// SplitMix64's mixing: an independent value in [0, 1) for each
+    /// `(i, k)`.
+    fn noise(i: usize, k: usize) -> f32 {
+        let mut x = (i as u64 * 4 + k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((x ^ (x >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// A background of `levels`: points 2 to 10 in front of a camera at
+    /// the origin looking down −z (most in its view), one in 11 a
+    /// direction, one in 7 an empty slot.
+    fn texels(levels: Levels) -> Vec<Texel> {
+        (0..levels.total() as usize)
+            .map(|i| {
+                let z = 2.0 + 8.0 * noise(i, 0);
+                let (x, y) = (noise(i, 1) - 0.5, noise(i, 2) - 0.5);
+                let point = [2.0 * x * z, 1.2 * y * z, -z, 1.0];
+                let direction = [x, y, -1.0, 0.0];
+                let alpha = f16::from_f32(if i % 7 == 3 { 0.0 } else { 1.0 });
+                Texel {
+                    pos: if i % 11 == 5 { direction } else { point },
+                    color: [f16::from_f32(noise(i, 3)), f16::ONE, f16::ZERO, alpha],
+                }
+            })
+            .collect()
+    }
+
+    /// The candidates made in lanes are those made one by one: four of one
+    /// level (every run of four), of two levels and past the last level,
+    /// with empty slots and directions among them, at every level count.
+    #[test]
+    fn candidates_in_lanes_are_the_candidates() {
+        use crate::testutil::looking;
+        let (w, h) = (37u32, 23u32);
+        let camera = looking([0.4, 0.1, 0.0], [0.3, 0.0, -1.0], (w, h), [0.0; 3]);
+        for count in 1..=MAX_LEVELS {
+            let levels = Levels::new(count, w, h);
+            let bg = texels(levels);
+            let layout = Layout::new(levels, levels);
+            let n = bg.len();
+            let mut landed = 0;
+            for first in 0..n {
+                let runs = [
+                    std::array::from_fn(|k| (first + k) % n),
+                    [first, (first + 5) % n, (first * 7) % n, (first + 300) % n],
+                ];
+                for ids in runs {
+                    let one = ids.map(|i| candidate(i, &bg[i], &camera, &layout));
+                    assert_eq!(candidates4(ids, &bg, &camera, &layout), one, "{ids:?}");
+                    landed += one
+                        .iter()
+                        .filter(|c| c.slot != Candidate::MISS.slot)
+                        .count();
+                }
+            }
+            assert!(landed > n, "count {count}");
         }
     }
 }
