@@ -375,7 +375,7 @@ mod tests {
     }
 
     /// The candidates made in lanes are those made one by one: four of one
-    /// level (every run of four), of two levels and past the last level,
+    /// level (every run of four) and of two levels (the scattered sets),
     /// with empty slots and directions among them, at every level count.
     #[test]
     fn candidates_in_lanes_are_the_candidates() {
