@@ -139,10 +139,9 @@ pub fn resolve_with(
 }
 
 /// [`resolve_with`] over the candidates of the listed `elements` only,
-/// every other element landing nowhere: for a pass that knows which of its
-/// elements can land (background fill: the fragments carried over from
-/// earlier frames, `background::collect`, a few thousand of 1.2 M at
-/// 720p, except after the history restarts). The same winners.
+/// every other element landing nowhere (the same winners): the plain
+/// reference of [`Sparse::take_listed`], which background fill takes its
+/// carried fragments with.
 pub fn resolve_listed(
     elements: &[u32],
     range: std::ops::Range<usize>,
@@ -200,12 +199,18 @@ impl Slots {
     /// where it cannot win, most of them where surfaces overlap).
     #[inline]
     fn take(&self, i: usize, c: Candidate) {
-        use std::sync::atomic::Ordering::Relaxed;
         if let Some(slot) = self.index(c).map(|s| &self.packed[s]) {
-            let v = Self::value(i, c);
-            if v > slot.load(Relaxed) {
-                slot.fetch_max(v, Relaxed);
-            }
+            Self::take_word(slot, Self::value(i, c));
+        }
+    }
+
+    /// `v` into `slot` with the atomic maximum, read first: no write where
+    /// it cannot win, most of them where surfaces overlap.
+    #[inline]
+    fn take_word(slot: &std::sync::atomic::AtomicU64, v: u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        if v > slot.load(Relaxed) {
+            slot.fetch_max(v, Relaxed);
         }
     }
 
@@ -343,9 +348,7 @@ impl Sparse {
                     for (i, c) in (first..count).zip(candidates(first)) {
                         if let Some(s) = slot(c) {
                             let v = Slots::value(i, c);
-                            if v > packed[s].load(Relaxed) {
-                                packed[s].fetch_max(v, Relaxed);
-                            }
+                            Slots::take_word(&packed[s], v);
                             all &= listed.len() < Self::LISTED;
                             if all {
                                 listed.push((s as u32, v));
@@ -409,17 +412,13 @@ impl Sparse {
         candidates: impl Fn([usize; LANES]) -> [Candidate; LANES] + Sync + Send,
     ) -> Taken<'_> {
         use rayon::prelude::*;
-        use std::sync::atomic::Ordering::Relaxed;
         let len = range.len();
         let packed = self.ready(len);
         let take = |ids: &[u32], landed: &mut dyn FnMut(u32)| {
             let ids = std::array::from_fn(|k| ids[k.min(ids.len() - 1)] as usize);
             for (i, c) in ids.into_iter().zip(candidates(ids)) {
                 if let Some(s) = within(range.start, len, c.slot as usize) {
-                    let v = Slots::value(i, c);
-                    if v > packed[s].load(Relaxed) {
-                        packed[s].fetch_max(v, Relaxed);
-                    }
+                    Slots::take_word(&packed[s], Slots::value(i, c));
                     landed(s as u32);
                 }
             }
