@@ -311,8 +311,9 @@ struct RunLanes<'a> {
     own: &'a Lanes,
     /// The winners' colours (red, green, blue).
     own_colors: [Lanes; 3],
-    /// Each position's fraction past its inner top-left tap.
+    /// Each position's fraction past its inner top-left tap, in x...
     fx: Lanes,
+    /// ...and in y.
     fy: Lanes,
 }
 
@@ -414,6 +415,37 @@ mod tests {
     use super::*;
     use crate::passes::common::camera::Columns;
 
+    /// A `w`×`h` image of textured colour (opaque) on one surface, its
+    /// columns from `edge` on a farther one.
+    fn textured(w: u32, h: u32, edge: u32) -> (Vec<[f32; 4]>, Vec<f32>) {
+        let n = (w * h) as usize;
+        let noise = |i: usize| ((i as f32 * 0.618_034).fract() * 7.31).fract();
+        let color = (0..n)
+            .map(|i| [0.1 + noise(i), noise(i + 1), 2.0 * noise(i + 2), 1.0])
+            .collect();
+        let depth = (0..n)
+            .map(|i| match i as u32 % w >= edge {
+                true => 9.0,
+                false => 3.0 + 0.01 * noise(i + 3),
+            })
+            .collect();
+        (color, depth)
+    }
+
+    /// Each lane of the run `colors` at `first` is its pixel's
+    /// [`resample::resample`] at `at`, bit for bit.
+    fn assert_pixels(src: Source<'_>, colors: &[Lanes; 3], first: usize, at: &[Vec2; RUN]) {
+        for l in 0..RUN {
+            let one = resample::resample(src, first + l, at[l], Resample::CatmullRom);
+            assert_eq!(
+                colors.map(|c| c[l].to_bits()),
+                one.map(f32::to_bits),
+                "run at {first}, lane {l}: {:?}",
+                at[l]
+            );
+        }
+    }
+
     /// A run gives each pixel's [`resample::resample`], bit for bit, or
     /// declines: lanes moved from their centres by the same or by
     /// different offsets (none, half a pixel either way, an ulp either
@@ -425,16 +457,7 @@ mod tests {
     fn runs_are_the_pixels_one_by_one_or_decline() {
         let (w, h) = (40u32, 12u32);
         let n = (w * h) as usize;
-        let noise = |i: usize| ((i as f32 * 0.618_034).fract() * 7.31).fract();
-        let color: Vec<[f32; 4]> = (0..n)
-            .map(|i| [0.1 + noise(i), noise(i + 1), 2.0 * noise(i + 2), 1.0])
-            .collect();
-        let depth: Vec<f32> = (0..n)
-            .map(|i| match i % w as usize {
-                31.. => 9.0,
-                _ => 3.0 + 0.01 * noise(i + 3),
-            })
-            .collect();
+        let (color, depth) = textured(w, h, 31);
         let src = Source {
             color: &color,
             depth: &depth,
@@ -470,15 +493,7 @@ mod tests {
                 // Lanes whose windows are not all one column apart.
                 let column = |l: usize| resample::floor(at[l].x - 0.5) - l as i32;
                 shifted += usize::from((1..RUN).any(|l| column(l) != column(0)));
-                for l in 0..RUN {
-                    let one = resample::resample(src, first + l, at[l], Resample::CatmullRom);
-                    assert_eq!(
-                        colors.map(|c| c[l].to_bits()),
-                        one.map(f32::to_bits),
-                        "run at {first}, lane {l}: {:?}",
-                        at[l]
-                    );
-                }
+                assert_pixels(src, &colors, first, &at);
             }
             let at = std::array::from_fn(|l| image.center(first + l));
             assert!(run(src, &planes, first, &at, Resample::Bilinear).is_none());
@@ -497,11 +512,7 @@ mod tests {
     fn shifted_runs_are_the_pixels_one_by_one() {
         let (w, h) = (24u32, 6u32);
         let n = (w * h) as usize;
-        let noise = |i: usize| ((i as f32 * 0.618_034).fract() * 7.31).fract();
-        let color: Vec<[f32; 4]> = (0..n)
-            .map(|i| [0.1 + noise(i), noise(i + 1), 2.0 * noise(i + 2), 1.0])
-            .collect();
-        let depth: Vec<f32> = (0..n).map(|i| 3.0 + 0.01 * noise(i + 3)).collect();
+        let (color, depth) = textured(w, h, w);
         let src = Source {
             color: &color,
             depth: &depth,
@@ -523,11 +534,7 @@ mod tests {
                     continue;
                 };
                 taken += 1;
-                for l in 0..RUN {
-                    let one = resample::resample(src, first + l, at[l], Resample::CatmullRom);
-                    let got = colors.map(|c| c[l].to_bits());
-                    assert_eq!(got, one.map(f32::to_bits), "run at {first}, lane {l}");
-                }
+                assert_pixels(src, &colors, first, &at);
             }
         }
         assert!(taken > 100, "{taken} shifted runs taken");
