@@ -192,6 +192,7 @@ fn recycled_buffers_leave_no_trace() {
         camera: prev_cam,
         levels,
         texels: &bg_a,
+        seeds: None,
     };
     let junk = Texel {
         pos: [3.0, f32::NAN, 1.0, 1.0],
@@ -228,6 +229,7 @@ fn recycled_buffers_leave_no_trace() {
         camera: PassCamera::new(&aside, b.meta.size, origin),
         texels: &clean,
         levels,
+        seeds: None,
     };
     let mut carried = vec![7, 7, 3];
     let reuse = vec![junk; levels.total() as usize];
@@ -262,4 +264,144 @@ fn recycled_buffers_leave_no_trace() {
     assert!(expected.iter().any(|&i| i < n as u32), "some on level 0");
     assert!(expected.iter().any(|&i| i >= n as u32), "some coarser");
     assert_eq!(carried, expected);
+}
+
+/// The CPU executor's backgrounds, whose level 0's seeds are not stored
+/// (`background::Unseeded`), are the whole ones without them: frame after
+/// frame, each collected from the previous unseeded one and its seeds,
+/// into the buffer of the one before it (only its listed texels emptied),
+/// made whole, is the reference's buffer bit for bit, with the same
+/// fragments carried over; the seeds' slots hold nothing, and the texels
+/// that hold a fragment are exactly the ones listed.
+#[test]
+fn unseeded_backgrounds_are_the_whole_ones() {
+    use framegen::passes::common::camera::PassCamera;
+    use framegen::passes::common::levels::Levels;
+    use framegen::passes::common::splat::Sparse;
+    use framegen::passes::gffe::background::{self, PrevBackground, Seeds, Texel, Unseeded, Work};
+    use framegen::passes::gffe::history::{History, PrevHistory, Tracker};
+    let all = tests::render_scene("crossing", SIZE, 60.0, 30..40);
+    let frames = framegen::decimate::decimate(&all, 2);
+    let prepared: Vec<_> = frames.iter().map(framegen::input::prepare).collect();
+    let n = SIZE.pixels() as usize;
+    let (k, eps, tol) = (3, 0.5, 0.02);
+    let levels = Levels::new(3, SIZE.width, SIZE.height);
+    let mut slots = Sparse::default();
+    // The previous frame's history, whole background and unseeded one.
+    let mut prev: Option<(History, Vec<background::Texel>, Unseeded)> = None;
+    let mut spare = Unseeded::default();
+    let mut carried_seen = 0;
+    for (index, (f, p)) in frames.iter().zip(&prepared).enumerate() {
+        let origin = f.meta.camera.pose.position;
+        let camera = PassCamera::new(&f.meta.camera, f.meta.size, origin);
+        let before = index
+            .checked_sub(1)
+            .map(|i| (&frames[i].meta, &prepared[i]));
+        let prev_cam = before.map(|(m, _)| PassCamera::new(&m.camera, m.size, origin));
+        let prev_hist = prev
+            .as_ref()
+            .zip(before)
+            .map(|((h, _, _), (_, pp))| PrevHistory {
+                camera: prev_cam.unwrap(),
+                positions: &h.positions,
+                track: &h.track,
+                depth: &pp.depth,
+            });
+        let hist = Tracker {
+            camera: &camera,
+            depth: &p.depth,
+            motion: &p.motion,
+            prev: prev_hist.as_ref(),
+            k,
+            epsilon: eps,
+            tolerance: Some(tol),
+        }
+        .track_into(History::empty());
+        let seeds = Seeds {
+            p0: &hist.positions[..n],
+            track: &hist.track,
+            color: &p.color,
+        };
+        let prev_bg = |unseeded: bool| {
+            prev.as_ref()
+                .zip(before)
+                .map(|((h, w, u), (_, pp))| PrevBackground {
+                    camera: prev_cam.unwrap(),
+                    levels,
+                    texels: if unseeded { &u.texels } else { w },
+                    seeds: unseeded.then_some(Seeds {
+                        p0: &h.positions[..n],
+                        track: &h.track,
+                        color: &pp.color,
+                    }),
+                })
+        };
+        let mut carried = Vec::new();
+        let work = Work {
+            carried: &mut carried,
+            slots: &mut slots,
+        };
+        let whole = background::collect(
+            Vec::new(),
+            &camera,
+            seeds,
+            levels,
+            prev_bg(false),
+            tol,
+            work,
+        );
+        let mut collect = |reuse| {
+            let prev = prev_bg(true);
+            background::collect_unseeded(reuse, &camera, seeds, levels, prev, tol, &mut slots)
+        };
+        let unseeded = collect(std::mem::take(&mut spare));
+        // Into a buffer whose listed texels hold junk (every 41st: few
+        // enough that only those are emptied).
+        let junk = Texel {
+            pos: [3.0, f32::NAN, 1.0, 1.0],
+            color: [9.0, 9.0, 9.0, 1.0].map(half::f16::from_f32),
+        };
+        let listed: Vec<u32> = (0..whole.len() as u32).step_by(41).collect();
+        let mut texels = vec![Texel::default(); whole.len()];
+        listed.iter().for_each(|&s| texels[s as usize] = junk);
+        let into_junk = collect(Unseeded {
+            texels,
+            carried: listed,
+        });
+        assert_eq!(
+            bytemuck::cast_slice::<_, u32>(&into_junk.texels),
+            bytemuck::cast_slice::<_, u32>(&unseeded.texels),
+            "frame {index}"
+        );
+        assert_eq!(into_junk.carried, unseeded.carried);
+        assert_eq!(unseeded.carried, carried, "frame {index}");
+        let valid: Vec<u32> = (0..unseeded.texels.len() as u32)
+            .filter(|&s| unseeded.texels[s as usize].is_valid())
+            .collect();
+        assert_eq!(
+            valid, unseeded.carried,
+            "frame {index}: only the carried are stored"
+        );
+        let made_whole = background::seeded(unseeded.texels.clone(), seeds);
+        assert_eq!(
+            bytemuck::cast_slice::<_, u32>(&made_whole),
+            bytemuck::cast_slice::<_, u32>(&whole),
+            "frame {index}"
+        );
+        // Confirmed (seeds) from the second frame on.
+        let seeded_here = (0..n).filter(|&x| background::seeds(hist.track[x])).count();
+        assert!(
+            index == 0 || seeded_here > n / 2,
+            "frame {index}: {seeded_here} seeds"
+        );
+        carried_seen += carried.len();
+        if let Some((_, _, u)) = prev.take() {
+            spare = u;
+        }
+        prev = Some((hist, whole, unseeded));
+    }
+    assert!(
+        frames.len() >= 4 && carried_seen > 100,
+        "{carried_seen} carried"
+    );
 }

@@ -33,10 +33,11 @@ struct FrameState {
     history: history::History,
     k: u32,
     levels: Levels,
-    background: Vec<background::Texel>,
-    /// The slots of its fragments carried over from earlier frames, which
-    /// background fill projects (`background::collect`).
-    carried: Vec<u32>,
+    /// Its background, level 0's seeds not stored (they are `history`'s
+    /// `P_0` and `frame`'s colour, [`FrameState::seeds`]), with the slots
+    /// of its fragments carried over from earlier frames, which background
+    /// fill projects.
+    background: background::Unseeded,
     /// Shading correction's `(r_t, aligned r_{t−1})` per pixel and flow
     /// per block; empty without an estimate.
     ratio: Vec<[f32; 2]>,
@@ -49,6 +50,19 @@ struct FrameState {
     /// warp; shading correction's changes are written into them as into
     /// `color`, and undone alike.
     planes: Planes,
+}
+
+impl FrameState {
+    /// What its background's level 0 is seeded with, not stored there
+    /// (`background::Unseeded`): its confirmed static pixels.
+    fn seeds(&self) -> background::Seeds<'_> {
+        let n = self.frame.depth.len();
+        background::Seeds {
+            p0: self.history.positions.get(..n).unwrap_or_default(),
+            track: &self.history.track,
+            color: &self.frame.color,
+        }
+    }
 }
 
 /// A rendered frame being ingested (between `upload` and `ingested`).
@@ -153,7 +167,7 @@ impl Backend for CpuBackend {
         Ok(self.current.as_ref().map(|c| Snapshot {
             positions: c.history.positions.clone(),
             track: c.history.track.clone(),
-            background: c.background.clone(),
+            background: background::seeded(c.background.texels.clone(), c.seeds()),
         }))
     }
 }
@@ -248,8 +262,7 @@ impl Executor for CpuBackend {
                 history: history::History::empty(),
                 k: plan.k,
                 levels: plan.levels,
-                background: Vec::new(),
-                carried: Vec::new(),
+                background: background::Unseeded::default(),
                 ratio: Vec::new(),
                 flow: Vec::new(),
                 luma: Vec::new(),
@@ -302,32 +315,19 @@ impl Executor for CpuBackend {
             .map(|(camera, p)| background::PrevBackground {
                 camera: *camera,
                 levels: p.levels,
-                texels: &p.background,
+                texels: &p.background.texels,
+                seeds: Some(p.seeds()),
             });
-        let n = i.state.frame.depth.len();
-        let (h, color) = (&i.state.history, &i.state.frame.color);
-        let (reuse, mut carried) = match i.spare.as_mut() {
-            Some(s) => (
-                std::mem::take(&mut s.background),
-                std::mem::take(&mut s.carried),
-            ),
+        let reuse = match i.spare.as_mut() {
+            Some(s) => std::mem::take(&mut s.background),
             None => Default::default(),
         };
+        let seeds = i.state.seeds();
         i.state.background = timed(&mut self.timings, Pass::Background, || {
-            let seeds = background::Seeds {
-                p0: &h.positions[..n],
-                track: &h.track,
-                color,
-            };
             let (levels, tolerance) = (plan.levels, plan.tolerance);
             let camera = &plan.camera;
-            let work = background::Work {
-                carried: &mut carried,
-                slots,
-            };
-            background::collect(reuse, camera, seeds, levels, prev, tolerance, work)
+            background::collect_unseeded(reuse, camera, seeds, levels, prev, tolerance, slots)
         });
-        i.state.carried = carried;
         Ok(())
     }
 
@@ -559,7 +559,7 @@ impl Executor for CpuBackend {
         let out = Self::output(&mut self.out)?;
         let sparse = &mut self.sparse;
         timed(&mut self.timings, Pass::BgFill, || {
-            let (bg, camera) = (&cur.background, &cur.camera);
+            let (bg, camera) = (&cur.background.texels, &cur.camera);
             let slots = 0..job.bg_target.total() as usize;
             // Only the fragments carried over from earlier frames can fill
             // a hole (`background::collect`): level 0's seeds are this
@@ -569,10 +569,11 @@ impl Executor for CpuBackend {
             // A frame without holes has nothing to fill. Where most of the
             // background was carried over (the history restarted: 800 k
             // fragments to project at 720p) that is worth asking first.
-            if cur.carried.len() > slots.len() / 8 && out.count(EMPTY) == 0 {
+            let carried = &cur.background.carried;
+            if carried.len() > slots.len() / 8 && out.count(EMPTY) == 0 {
                 return;
             }
-            let won = sparse.take_listed(&cur.carried, slots, |ids| {
+            let won = sparse.take_listed(carried, slots, |ids| {
                 bgfill::candidates4(ids, bg, &job.target, &layout)
             });
             let won = |slot| won.get(slot);

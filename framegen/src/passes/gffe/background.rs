@@ -78,51 +78,81 @@ pub struct PrevBackground<'a> {
     pub levels: Levels,
     /// Its texels.
     pub texels: &'a [Texel],
+    /// Where `texels` does not hold level 0's seeds (an [`Unseeded`]
+    /// buffer): the previous frame's, which are read where they are.
+    pub seeds: Option<Seeds<'a>>,
 }
 
-/// CPU reference of step 1: level 0 from the confirmed static fragments;
-/// the other levels empty. Into `reuse` when it has the right size (every
-/// texel is written). Also returns level 0's [`Held`] depths as `camera`
-/// sees them, made in the same loop.
-fn init(
-    reuse: Vec<Texel>,
-    from: Seeds<'_>,
-    levels: Levels,
-    camera: &PassCamera,
-) -> (Vec<Texel>, Vec<Held>) {
+/// A background as the CPU executor keeps it: level 0's seeds are not
+/// stored. They are the frame's own confirmed static pixels, its `P_0`
+/// and colour ([`Seeds`]), which the next frame's collection reads where
+/// they are (its [`PrevBackground::seeds`]) and which background fill
+/// never needs (see [`seeds`]). Every other texel is empty except those
+/// listed in `carried`. A frame's worth of 24-byte texels is not written
+/// per rendered frame (720p: 22 MB); the next frame reads the seeds'
+/// positions and track words where they are (20 bytes a pixel instead of
+/// 24), their colour only for the few that land. [`seeded`] makes the
+/// whole buffer where it is asked for.
+#[derive(Clone, Debug, Default)]
+pub struct Unseeded {
+    /// The texels; level 0's seeds left empty.
+    pub texels: Vec<Texel>,
+    /// The slots that hold a fragment, ascending: every fragment carried
+    /// over from the previous background, the only ones background fill
+    /// can fill a hole with.
+    pub carried: Vec<u32>,
+}
+
+/// `texels`, an [`Unseeded`] background's, with level 0's seeds `from`
+/// (those it was collected with) written in: the whole buffer, as the GPU
+/// keeps it.
+pub fn seeded(mut texels: Vec<Texel>, from: Seeds<'_>) -> Vec<Texel> {
     use rayon::prelude::*;
-    let Seeds { p0, track, color } = from;
-    let mut bg = reuse;
-    if bg.len() != levels.total() as usize {
-        bg = crate::par::filled(Texel::default(), levels.total() as usize);
-    }
-    if levels.count == 0 {
-        return (bg, Vec::new());
-    }
-    let (level0, coarser) = bg.split_at_mut(levels.len(0) as usize);
-    let mut held = Vec::new();
-    level0
+    let n = from.track.len().min(texels.len());
+    texels[..n]
         .par_iter_mut()
         .enumerate()
-        .with_max_len(16 * 1024)
-        .map(|(x, slot)| {
-            *slot = if seeds(track[x]) {
-                let c = color[x];
-                Texel {
-                    pos: p0[x],
-                    color: [c[0], c[1], c[2], f16::ONE],
-                }
-            } else {
-                Texel::default()
-            };
-            Held::of(slot, camera)
-        })
-        .collect_into_vec(&mut held);
-    coarser
+        .with_min_len(16 * 1024)
+        .for_each(|(x, t)| {
+            if let Some(seed) = from.texel(x) {
+                *t = seed;
+            }
+        });
+    texels
+}
+
+/// `reuse` emptied for a background of `levels`: only the slots it lists
+/// are written where it has the right size (the others are empty
+/// already), every slot otherwise.
+fn emptied(reuse: Unseeded, levels: Levels) -> Unseeded {
+    let Unseeded {
+        mut texels,
+        mut carried,
+    } = reuse;
+    let total = levels.total() as usize;
+    if texels.len() != total || carried.len() > total / 16 {
+        texels = all_empty(texels, total);
+    } else {
+        for &s in &carried {
+            texels[s as usize] = Texel::default();
+        }
+    }
+    carried.clear();
+    Unseeded { texels, carried }
+}
+
+/// `total` empty texels, into `reuse` where it has that size.
+fn all_empty(reuse: Vec<Texel>, total: usize) -> Vec<Texel> {
+    use rayon::prelude::*;
+    let mut texels = reuse;
+    if texels.len() != total {
+        return crate::par::filled(Texel::default(), total);
+    }
+    texels
         .par_iter_mut()
-        .with_min_len(4096)
+        .with_min_len(16 * 1024)
         .for_each(|t| *t = Texel::default());
-    (bg, held)
+    texels
 }
 
 /// What a slot of the current buffer holds, as [`judge`] asks it: nothing,
@@ -134,19 +164,41 @@ fn init(
 struct Held(f32);
 
 impl Held {
-    /// An empty slot: a signalling NaN, which [`Held::of`] never stores
+    /// An empty slot: a signalling NaN, which [`Held::at`] never stores
     /// (it stores every NaN depth as the quiet `f32::NAN`; [`judge`] takes
     /// all NaNs alike).
     const EMPTY: u32 = 0x7F80_0001;
 
+    /// A fragment at `pos`, its depth in `camera`.
+    #[inline]
+    fn at(pos: [f32; 4], camera: &PassCamera) -> Self {
+        let depth = camera.depth_of(pos);
+        Self(if depth.is_nan() { f32::NAN } else { depth })
+    }
+
     /// What `texel` holds, its depth in `camera`.
     #[inline]
     fn of(texel: &Texel, camera: &PassCamera) -> Self {
-        if !texel.is_valid() {
-            return Self(f32::from_bits(Self::EMPTY));
+        match texel.is_valid() {
+            true => Self::at(texel.pos, camera),
+            false => Self(f32::from_bits(Self::EMPTY)),
         }
-        let depth = camera.depth_of(texel.pos);
-        Self(if depth.is_nan() { f32::NAN } else { depth })
+    }
+
+    /// What level 0's `n` slots hold before the previous fragments are
+    /// taken (step 1): the seeds, as `camera` sees them.
+    fn seeds(from: Seeds<'_>, n: usize, camera: &PassCamera) -> Vec<Self> {
+        use rayon::prelude::*;
+        let mut held = Vec::new();
+        (0..n)
+            .into_par_iter()
+            .with_max_len(16 * 1024)
+            .map(|x| match from.position(x) {
+                Some(pos) => Self::at(pos, camera),
+                None => Self(f32::from_bits(Self::EMPTY)),
+            })
+            .collect_into_vec(&mut held);
+        held
     }
 
     /// The depth of the fragment held, or `None` where there is none.
@@ -185,23 +237,25 @@ pub fn candidate(
     tolerance: f32,
 ) -> Candidate {
     let current = Current::Texels(bg, camera);
-    candidate_in(t, shift, camera, current, (here, next), tolerance)
+    let pos = t.is_valid().then_some(t.pos);
+    candidate_in(pos, shift, camera, current, (here, next), tolerance)
 }
 
-/// [`candidate`] judged against `current`.
+/// [`candidate`] of a fragment at `pos` (`None`: no fragment) judged
+/// against `current`.
 #[inline]
 fn candidate_in(
-    t: &Texel,
+    pos: Option<[f32; 4]>,
     shift: Vec3,
     camera: &PassCamera,
     current: Current<'_>,
     (here, next): (Grid, Option<Grid>),
     tolerance: f32,
 ) -> Candidate {
-    if !t.is_valid() {
+    let Some(pos) = pos else {
         return Candidate::MISS;
-    }
-    let Some(r) = camera.project(rebase(t.pos, shift)) else {
+    };
+    let Some(r) = camera.project(rebase(pos, shift)) else {
         return Candidate::MISS;
     };
     let Some(slot) = here.slot(r.pixel) else {
@@ -258,7 +312,8 @@ pub fn candidates4(
     tolerance: f32,
 ) -> [Candidate; LANES] {
     let held = Current::Texels(bg, camera);
-    candidates4_in(t, shift, camera, held, grids, tolerance)
+    let pos = t.map(|t| t.is_valid().then_some(t.pos));
+    candidates4_in(pos, shift, camera, held, grids, tolerance)
 }
 
 /// The current buffer as one level's fragments are judged against it.
@@ -267,7 +322,7 @@ enum Current<'a> {
     /// Its texels, seen by a camera.
     Texels(&'a [Texel], &'a PassCamera),
     /// What level 0 holds, slot by slot: while level 0's fragments are
-    /// judged, the same as its texels say.
+    /// judged, its seeds.
     Level0(&'a [Held]),
 }
 
@@ -282,24 +337,26 @@ impl Current<'_> {
     }
 }
 
-/// [`candidates4`] judged against `current`.
+/// [`candidates4`] of fragments at `pos` (`None`: no fragment) judged
+/// against `current`.
 #[inline]
 fn candidates4_in(
-    t: &[Texel; LANES],
+    pos: [Option<[f32; 4]>; LANES],
     shift: Vec3,
     camera: &PassCamera,
     current: Current<'_>,
     (here, next): (Grid, Option<Grid>),
     tolerance: f32,
 ) -> [Candidate; LANES] {
-    let (p, w) = Lanes3::from_positions(&t.map(|t| t.pos));
+    // A lane without a fragment projects the origin, and is not judged.
+    let (p, w) = Lanes3::from_positions(&pos.map(Option::unwrap_or_default));
     // `rebase`: a point moves with the origin.
     let point = w.cmpgt(Vec4::splat(0.5));
     let shifted = p + Lanes3::splat([shift.x, shift.y, shift.z, 0.0]);
     let r = project4(camera, Lanes3::select(point, shifted, p), w);
     let cells = cells4(&r, here.width, here.height, here.scale);
     std::array::from_fn(|l| match cells[l] {
-        Some(cell) if t[l].is_valid() => {
+        Some(cell) if pos[l].is_some() => {
             let to = Landing {
                 slot: here.offset + cell,
                 pixel: r.pixel(l),
@@ -331,6 +388,55 @@ pub struct Seeds<'a> {
     pub color: &'a [[f16; 4]],
 }
 
+impl Seeds<'_> {
+    /// The position of slot `x`'s seed, if it has one.
+    #[inline]
+    fn position(&self, x: usize) -> Option<[f32; 4]> {
+        let track = *self.track.get(x)?;
+        seeds(track).then(|| self.p0.get(x).copied()).flatten()
+    }
+
+    /// Slot `x`'s seed, if it has one: its `P_0` and its colour, alpha 1.
+    #[inline]
+    fn texel(&self, x: usize) -> Option<Texel> {
+        let pos = self.position(x)?;
+        let [r, g, b, _] = *self.color.get(x)?;
+        Some(Texel {
+            pos,
+            color: [r, g, b, f16::ONE],
+        })
+    }
+}
+
+/// One level of the previous background, as its fragments are read.
+#[derive(Clone, Copy, Debug)]
+struct Fragments<'a> {
+    texels: &'a [Texel],
+    /// Level 0's seeds where `texels` does not hold them.
+    seeds: Option<Seeds<'a>>,
+}
+
+impl Fragments<'_> {
+    /// Fragment `i`.
+    #[inline]
+    fn get(&self, i: usize) -> Texel {
+        match self.seeds.and_then(|s| s.texel(i)) {
+            Some(seed) => seed,
+            None => self.texels[i],
+        }
+    }
+
+    /// Where fragment `i` is, if there is one (its colour not read).
+    #[inline]
+    fn position(&self, i: usize) -> Option<[f32; 4]> {
+        if let Some(pos) = self.seeds.and_then(|s| s.position(i)) {
+            return Some(pos);
+        }
+        let t = self.texels.get(i)?;
+        t.is_valid().then_some(t.pos)
+    }
+}
+
 /// CPU reference of the whole collection for one rendered frame, into
 /// `reuse` where its size fits (a background no longer needed; every texel
 /// is written). `camera` is `C_t` (centre at the origin).
@@ -342,6 +448,9 @@ pub struct Seeds<'a> {
 /// few thousand of 1.2 M slots, which the CPU executor's background fill
 /// then projects instead of reading every texel. Its splats take
 /// `work.slots` ([`splat::Sparse`]: few of the previous fragments land).
+///
+/// [`collect_unseeded`] with every texel emptied first and the seeds
+/// written in after ([`seeded`]).
 pub fn collect(
     reuse: Vec<Texel>,
     camera: &PassCamera,
@@ -353,15 +462,50 @@ pub fn collect(
 ) -> Vec<Texel> {
     let Work { carried, slots } = work;
     carried.clear();
-    let (mut bg, level0) = init(reuse, from, levels, camera);
-    let Some(prev) = prev.filter(|p| p.levels.count == levels.count) else {
-        return bg;
+    let empty = Unseeded {
+        texels: all_empty(reuse, levels.total() as usize),
+        carried: std::mem::take(carried),
     };
+    let bg = collect_unseeded(empty, camera, from, levels, prev, tolerance, slots);
+    *carried = bg.carried;
+    seeded(bg.texels, from)
+}
+
+/// The collection as the CPU executor runs it, into a background whose
+/// level 0's seeds are not stored ([`Unseeded`]): [`collect`]'s buffer
+/// without them, and its list of fragments carried over. `reuse` is a
+/// background no longer needed, [`Unseeded`] too: only the texels it
+/// lists are emptied.
+pub fn collect_unseeded(
+    reuse: Unseeded,
+    camera: &PassCamera,
+    from: Seeds<'_>,
+    levels: Levels,
+    prev: Option<PrevBackground<'_>>,
+    tolerance: f32,
+    slots: &mut splat::Sparse,
+) -> Unseeded {
+    let Unseeded {
+        texels: mut bg,
+        mut carried,
+    } = emptied(reuse, levels);
+    let prev = prev.filter(|p| p.levels.count == levels.count);
+    let Some(prev) = prev.filter(|_| levels.count > 0) else {
+        return Unseeded {
+            texels: bg,
+            carried,
+        };
+    };
+    // Step 1: level 0 holds the seeds.
+    let level0 = Held::seeds(from, levels.len(0) as usize, camera);
     use rayon::prelude::*;
     let shift = Vec3::from_slice(&prev.camera.eye[..3]);
     for l in 0..levels.count {
         let start = prev.levels.offset(l) as usize;
-        let source = &prev.texels[start..start + prev.levels.len(l) as usize];
+        let source = Fragments {
+            texels: &prev.texels[start..start + prev.levels.len(l) as usize],
+            seeds: prev.seeds.filter(|_| l == 0),
+        };
         // Level l's candidates land in level l or l + 1.
         let (begin, end) = (levels.offset(l), levels.offset((l + 2).min(levels.count)));
         let (here, next) = (
@@ -376,14 +520,9 @@ pub fn collect(
         // Few land (most previous fragments meet the same surface again):
         // the sparse splat.
         let range = begin as usize..end as usize;
-        let won = slots.resolve(source.len(), range.clone(), |i| {
-            match source.get(i..).and_then(|s| s.first_chunk()) {
-                Some(t) => candidates4_in(t, shift, camera, current, grids, tolerance),
-                None => std::array::from_fn(|k| match source.get(i + k) {
-                    Some(t) => candidate_in(t, shift, camera, current, grids, tolerance),
-                    None => Candidate::MISS,
-                }),
-            }
+        let won = slots.resolve(source.texels.len(), range.clone(), |i| {
+            let pos = std::array::from_fn(|k| source.position(i + k));
+            candidates4_in(pos, shift, camera, current, grids, tolerance)
         });
         // Each won slot from its fragment, by blocks of slots (`won` is
         // ascending).
@@ -392,7 +531,7 @@ pub fn collect(
             let first = begin as usize + b * BLOCK;
             let from = |s: usize| won.partition_point(|&(w, _)| (w as usize) < s);
             for &(s, i) in &won[from(first)..from(first + block.len())] {
-                let t = source[i as usize];
+                let t = source.get(i as usize);
                 block[s as usize - first] = Texel {
                     pos: rebase(t.pos, shift),
                     color: t.color,
@@ -405,7 +544,10 @@ pub fn collect(
     // listed twice.
     carried.sort_unstable();
     carried.dedup();
-    bg
+    Unseeded {
+        texels: bg,
+        carried,
+    }
 }
 
 #[repr(C)]
@@ -607,7 +749,8 @@ mod tests {
             let four: &[Texel; LANES] = four.try_into().unwrap();
             let lanes = candidates4(four, shift, &camera, &bg, (here, next), 0.02);
             let held = Current::Level0(&level0);
-            let planes = candidates4_in(four, shift, &camera, held, (here, next), 0.02);
+            let pos = four.map(|t| t.is_valid().then_some(t.pos));
+            let planes = candidates4_in(pos, shift, &camera, held, (here, next), 0.02);
             for ((t, c), p) in four.iter().zip(lanes).zip(planes) {
                 assert_eq!(c, candidate(t, shift, &camera, &bg, here, next, 0.02));
                 assert_eq!(p, c);
@@ -671,7 +814,8 @@ mod tests {
             track: &track,
             color: &color,
         };
-        let (bg, held) = init(Vec::new(), from, levels, &camera);
+        let bg = seeded(emptied(Unseeded::default(), levels).texels, from);
+        let held = Held::seeds(from, n, &camera);
         assert_eq!(held.len(), n);
         let mut kinds = [0usize; 3];
         for (x, (t, h)) in bg.iter().zip(&held).enumerate() {
