@@ -156,10 +156,9 @@ fn all_empty(reuse: Vec<Texel>, total: usize) -> Vec<Texel> {
 }
 
 /// What a slot of the current buffer holds, as [`judge`] asks it: nothing,
-/// or a fragment at a view depth. Level 0's are kept as a plane of these
-/// while its previous fragments are judged: 4 bytes read per landing
-/// instead of the 32 of its texel (720p default scene: the background
-/// pass 8.9–9.2 → 7.8–8.0 ms, the same bits).
+/// or a fragment at a view depth. While the previous level 0's fragments
+/// are judged, level 0 holds the seeds, read where they are: 20 bytes a
+/// landing (`P_0` and the track word), and no plane of them made first.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Held(f32);
 
@@ -168,6 +167,9 @@ impl Held {
     /// (it stores every NaN depth as the quiet `f32::NAN`; [`judge`] takes
     /// all NaNs alike).
     const EMPTY: u32 = 0x7F80_0001;
+
+    /// Nothing held.
+    const NOTHING: Self = Self(f32::from_bits(Self::EMPTY));
 
     /// A fragment at `pos`, its depth in `camera`.
     #[inline]
@@ -181,24 +183,8 @@ impl Held {
     fn of(texel: &Texel, camera: &PassCamera) -> Self {
         match texel.is_valid() {
             true => Self::at(texel.pos, camera),
-            false => Self(f32::from_bits(Self::EMPTY)),
+            false => Self::NOTHING,
         }
-    }
-
-    /// What level 0's `n` slots hold before the previous fragments are
-    /// taken (step 1): the seeds, as `camera` sees them.
-    fn seeds(from: Seeds<'_>, n: usize, camera: &PassCamera) -> Vec<Self> {
-        use rayon::prelude::*;
-        let mut held = Vec::new();
-        (0..n)
-            .into_par_iter()
-            .with_max_len(16 * 1024)
-            .map(|x| match from.position(x) {
-                Some(pos) => Self::at(pos, camera),
-                None => Self(f32::from_bits(Self::EMPTY)),
-            })
-            .collect_into_vec(&mut held);
-        held
     }
 
     /// The depth of the fragment held, or `None` where there is none.
@@ -321,9 +307,9 @@ pub fn candidates4(
 enum Current<'a> {
     /// Its texels, seen by a camera.
     Texels(&'a [Texel], &'a PassCamera),
-    /// What level 0 holds, slot by slot: while level 0's fragments are
-    /// judged, its seeds.
-    Level0(&'a [Held]),
+    /// Level 0 while its previous fragments are judged: the seeds (step
+    /// 1), read where they are, seen by a camera.
+    Seeds(Seeds<'a>, &'a PassCamera),
 }
 
 impl Current<'_> {
@@ -332,7 +318,10 @@ impl Current<'_> {
     fn held(self, slot: u32) -> Held {
         match self {
             Current::Texels(bg, camera) => Held::of(&bg[slot as usize], camera),
-            Current::Level0(held) => held[slot as usize],
+            Current::Seeds(seeds, camera) => match seeds.position(slot as usize) {
+                Some(pos) => Held::at(pos, camera),
+                None => Held::NOTHING,
+            },
         }
     }
 }
@@ -432,8 +421,33 @@ impl Fragments<'_> {
         if let Some(pos) = self.seeds.and_then(|s| s.position(i)) {
             return Some(pos);
         }
+        self.stored(i)
+    }
+
+    /// Where the fragment stored in texel `i` is, if there is one.
+    #[inline]
+    fn stored(&self, i: usize) -> Option<[f32; 4]> {
         let t = self.texels.get(i)?;
         t.is_valid().then_some(t.pos)
+    }
+
+    /// [`Fragments::position`] of fragments `i .. i + LANES` (`None` past
+    /// the end), read as runs: seeds' positions and track words where the
+    /// previous frame's seeds stand in for texels (most of level 0),
+    /// texels elsewhere.
+    #[inline]
+    fn positions4(&self, i: usize) -> [Option<[f32; 4]>; LANES] {
+        let Some(s) = self.seeds else {
+            return std::array::from_fn(|k| self.stored(i + k));
+        };
+        let track = s.track.get(i..).and_then(|t| t.first_chunk::<LANES>());
+        match (track, s.p0.get(i..).and_then(|p| p.first_chunk::<LANES>())) {
+            (Some(track), Some(p0)) => std::array::from_fn(|k| match seeds(track[k]) {
+                true => Some(p0[k]),
+                false => self.stored(i + k),
+            }),
+            _ => std::array::from_fn(|k| self.position(i + k)),
+        }
     }
 }
 
@@ -497,7 +511,6 @@ pub fn collect_unseeded(
         };
     };
     // Step 1: level 0 holds the seeds.
-    let level0 = Held::seeds(from, levels.len(0) as usize, camera);
     use rayon::prelude::*;
     let shift = Vec3::from_slice(&prev.camera.eye[..3]);
     for l in 0..levels.count {
@@ -513,7 +526,7 @@ pub fn collect_unseeded(
             (l + 1 < levels.count).then(|| levels.grid(l + 1)),
         );
         let current = match l {
-            0 => Current::Level0(&level0),
+            0 => Current::Seeds(from, camera),
             _ => Current::Texels(&bg, camera),
         };
         let grids = (here, next);
@@ -521,8 +534,14 @@ pub fn collect_unseeded(
         // the sparse splat.
         let range = begin as usize..end as usize;
         let won = slots.resolve(source.texels.len(), range.clone(), |i| {
-            let pos = std::array::from_fn(|k| source.position(i + k));
-            candidates4_in(pos, shift, camera, current, grids, tolerance)
+            candidates4_in(
+                source.positions4(i),
+                shift,
+                camera,
+                current,
+                grids,
+                tolerance,
+            )
         });
         // Each won slot from its fragment, by blocks of slots (`won` is
         // ascending).
@@ -685,7 +704,7 @@ mod tests {
     use super::*;
 
     /// Four fragments at a time are judged as one by one, and against
-    /// level 0's held depths as against its texels: over fragments that
+    /// level 0's seeds (read where they are) as against its texels: over fragments that
     /// are points, skies, nothing or NaN, landing on and off the image, on
     /// empty slots, on the same surface, behind it, and on slots whose
     /// fragment has no depth (NaN).
@@ -717,9 +736,20 @@ mod tests {
                 }
             })
             .collect();
-        let level0: Vec<Held> = (bg[..levels.len(0) as usize].iter())
-            .map(|t| Held::of(t, &camera))
+        // Level 0 as seeds: a fragment's position and a seed's track word
+        // where it holds one (`history::is_confirmed`, static).
+        let n = levels.len(0) as usize;
+        let p0: Vec<[f32; 4]> = bg[..n].iter().map(|t| t.pos).collect();
+        let track: Vec<u32> = bg[..n]
+            .iter()
+            .map(|t| 2 * u32::from(t.is_valid()))
             .collect();
+        let color = vec![[f16::ONE; 4]; n];
+        let level0 = Seeds {
+            p0: &p0,
+            track: &track,
+            color: &color,
+        };
         let shift = Vec3::new(0.02, -0.01, 0.03);
         let source: Vec<Texel> = (0..4000)
             .map(|i| {
@@ -748,7 +778,7 @@ mod tests {
         for four in source.chunks_exact(LANES) {
             let four: &[Texel; LANES] = four.try_into().unwrap();
             let lanes = candidates4(four, shift, &camera, &bg, (here, next), 0.02);
-            let held = Current::Level0(&level0);
+            let held = Current::Seeds(level0, &camera);
             let pos = four.map(|t| t.is_valid().then_some(t.pos));
             let planes = candidates4_in(pos, shift, &camera, held, (here, next), 0.02);
             for ((t, c), p) in four.iter().zip(lanes).zip(planes) {
@@ -766,8 +796,8 @@ mod tests {
         assert!(outcomes.iter().all(|&n| n > 200), "{outcomes:?}");
     }
 
-    /// Level 0's held depths are what its texels hold, as the current
-    /// camera sees them: none where a slot is empty (a NaN position
+    /// What level 0 holds, read from the seeds, is what its texels hold
+    /// once seeded, as the current camera sees them: none where a slot is empty (a NaN position
     /// included), a NaN where a held fragment has no depth, never read as
     /// empty. Its seeds' colours are the frame's, exactly, alpha 1.
     #[test]
@@ -815,10 +845,10 @@ mod tests {
             color: &color,
         };
         let bg = seeded(emptied(Unseeded::default(), levels).texels, from);
-        let held = Held::seeds(from, n, &camera);
-        assert_eq!(held.len(), n);
+        let held = Current::Seeds(from, &camera);
         let mut kinds = [0usize; 3];
-        for (x, (t, h)) in bg.iter().zip(&held).enumerate() {
+        for (x, t) in bg[..n].iter().enumerate() {
+            let h = held.held(x as u32);
             assert_eq!(t.is_valid(), seeds(track[x]));
             // A seed's colour, as the passes take it, is the frame's.
             if t.is_valid() {
