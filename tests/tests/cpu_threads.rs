@@ -5,6 +5,9 @@
 //! buffers of a frame no longer needed (history, background) leave nothing
 //! of what those buffers held.
 
+use framegen::input::Prepared;
+use framegen::passes::common::camera::PassCamera;
+use framegen::passes::gffe::history::{History, PrevHistory};
 use framegen::{FrameGenerator, Method, Settings};
 use protocol::{Frame, FrameSize};
 
@@ -94,11 +97,10 @@ fn cpu_output_is_the_same_for_any_thread_count() {
 /// give the same bits as into fresh ones.
 #[test]
 fn recycled_buffers_leave_no_trace() {
-    use framegen::passes::common::camera::PassCamera;
     use framegen::passes::common::levels::Levels;
     use framegen::passes::common::splat::Sparse;
     use framegen::passes::gffe::background::{self, PrevBackground, Seeds, Texel, Work};
-    use framegen::passes::gffe::history::{self, History, PrevHistory, Tracker};
+    use framegen::passes::gffe::history::{self, Tracker};
     let bits = |v: &[[f32; 4]]| -> Vec<u32> { v.iter().flatten().map(|x| x.to_bits()).collect() };
     // One set of splat slots for every collection: each leaves them empty.
     let mut slots = Sparse::default();
@@ -149,13 +151,14 @@ fn recycled_buffers_leave_no_trace() {
         epsilon: eps,
         tolerance: Some(tol),
     };
-    let fresh = tracker.track_into(History::empty());
+    // Compared whole: a pixel that is not dynamic stores only `P_0`.
+    let fresh = tracker.track_into(History::empty()).expanded();
     let garbage = History {
         positions: vec![[f32::NAN, 1e30, -7.0, 1.0]; k as usize * n],
         track: vec![0xdead_beef; n],
         dynamic: 12345,
     };
-    let recycled = tracker.track_into(garbage);
+    let recycled = tracker.track_into(garbage).expanded();
     assert!(
         fresh.dynamic > 0,
         "the frames move, so some pixels are dynamic"
@@ -169,7 +172,8 @@ fn recycled_buffers_leave_no_trace() {
         tolerance: None,
         ..tracker
     }
-    .track_into(History::empty());
+    .track_into(History::empty())
+    .expanded();
     assert!(fresh.track.iter().any(|w| history::is_confirmed(*w)));
     // A confirmed pixel always has a position (the background seeds level
     // 0 from the track word alone, `background::seeds`), also where the
@@ -266,6 +270,44 @@ fn recycled_buffers_leave_no_trace() {
     assert_eq!(carried, expected);
 }
 
+/// Five frames of a scene whose objects move (rendered at 60 fps, every
+/// other one kept), with each prepared as the passes read it.
+fn moving_frames() -> (Vec<Frame>, Vec<Prepared>) {
+    let all = tests::render_scene("crossing", SIZE, 60.0, 30..40);
+    let frames = framegen::decimate::decimate(&all, 2);
+    let prepared = frames.iter().map(framegen::input::prepare).collect();
+    (frames, prepared)
+}
+
+/// Frame `index`'s camera (centre at its origin) and, after the first,
+/// the previous frame's camera as it sees it, with that frame prepared.
+fn cameras<'a>(
+    frames: &[Frame],
+    prepared: &'a [Prepared],
+    index: usize,
+) -> (PassCamera, Option<(PassCamera, &'a Prepared)>) {
+    let meta = &frames[index].meta;
+    let origin = meta.camera.pose.position;
+    let before = index.checked_sub(1).map(|i| {
+        let m = &frames[i].meta;
+        (PassCamera::new(&m.camera, m.size, origin), &prepared[i])
+    });
+    (PassCamera::new(&meta.camera, meta.size, origin), before)
+}
+
+/// `h` as the next frame continues it (`before`, from [`cameras`]).
+fn continued<'a>(
+    h: &'a History,
+    before: Option<(PassCamera, &'a Prepared)>,
+) -> Option<PrevHistory<'a>> {
+    before.map(|(camera, p)| PrevHistory {
+        camera,
+        positions: &h.positions,
+        track: &h.track,
+        depth: &p.depth,
+    })
+}
+
 /// The CPU executor's backgrounds, whose level 0's seeds are not stored
 /// (`background::Unseeded`), are the whole ones without them: frame after
 /// frame, each collected from the previous unseeded one and its seeds,
@@ -275,14 +317,11 @@ fn recycled_buffers_leave_no_trace() {
 /// that hold a fragment are exactly the ones listed.
 #[test]
 fn unseeded_backgrounds_are_the_whole_ones() {
-    use framegen::passes::common::camera::PassCamera;
     use framegen::passes::common::levels::Levels;
     use framegen::passes::common::splat::Sparse;
     use framegen::passes::gffe::background::{self, PrevBackground, Seeds, Texel, Unseeded, Work};
-    use framegen::passes::gffe::history::{History, PrevHistory, Tracker};
-    let all = tests::render_scene("crossing", SIZE, 60.0, 30..40);
-    let frames = framegen::decimate::decimate(&all, 2);
-    let prepared: Vec<_> = frames.iter().map(framegen::input::prepare).collect();
+    use framegen::passes::gffe::history::Tracker;
+    let (frames, prepared) = moving_frames();
     let n = SIZE.pixels() as usize;
     let (k, eps, tol) = (3, 0.5, 0.02);
     let levels = Levels::new(3, SIZE.width, SIZE.height);
@@ -291,22 +330,9 @@ fn unseeded_backgrounds_are_the_whole_ones() {
     let mut prev: Option<(History, Vec<background::Texel>, Unseeded)> = None;
     let mut spare = Unseeded::default();
     let mut carried_seen = 0;
-    for (index, (f, p)) in frames.iter().zip(&prepared).enumerate() {
-        let origin = f.meta.camera.pose.position;
-        let camera = PassCamera::new(&f.meta.camera, f.meta.size, origin);
-        let before = index
-            .checked_sub(1)
-            .map(|i| (&frames[i].meta, &prepared[i]));
-        let prev_cam = before.map(|(m, _)| PassCamera::new(&m.camera, m.size, origin));
-        let prev_hist = prev
-            .as_ref()
-            .zip(before)
-            .map(|((h, _, _), (_, pp))| PrevHistory {
-                camera: prev_cam.unwrap(),
-                positions: &h.positions,
-                track: &h.track,
-                depth: &pp.depth,
-            });
+    for (index, p) in prepared.iter().enumerate() {
+        let (camera, before) = cameras(&frames, &prepared, index);
+        let prev_hist = prev.as_ref().and_then(|(h, _, _)| continued(h, before));
         let hist = Tracker {
             camera: &camera,
             depth: &p.depth,
@@ -325,8 +351,8 @@ fn unseeded_backgrounds_are_the_whole_ones() {
         let prev_bg = |unseeded: bool| {
             prev.as_ref()
                 .zip(before)
-                .map(|((h, w, u), (_, pp))| PrevBackground {
-                    camera: prev_cam.unwrap(),
+                .map(|((h, w, u), (camera, pp))| PrevBackground {
+                    camera,
                     levels,
                     texels: if unseeded { &u.texels } else { w },
                     seeds: unseeded.then_some(Seeds {
@@ -404,4 +430,57 @@ fn unseeded_backgrounds_are_the_whole_ones() {
         frames.len() >= 4 && carried_seen > 100,
         "{carried_seen} carried"
     );
+}
+
+/// The CPU executor's histories, whose pixels that are not dynamic store
+/// only `P_0`, are the whole ones: frame after frame at `k = 4`, each
+/// tracked from the previous compact one into buffers full of garbage,
+/// made whole, is `history::track`'s from the previous whole one, bit for
+/// bit (a trajectory that continues a static pixel reads its `P_0`).
+#[test]
+fn compact_histories_are_the_whole_ones() {
+    use framegen::passes::gffe::history::{self, Tracker};
+    let (frames, prepared) = moving_frames();
+    let n = SIZE.pixels() as usize;
+    let (k, eps, tol) = (4, 0.5, 0.02);
+    let bits = |h: &History| -> Vec<u32> {
+        let p = h.positions.iter().flatten().map(|v| v.to_bits());
+        p.chain(h.track.iter().copied()).collect()
+    };
+    let mut prev: Option<(History, History)> = None;
+    let mut continued_chains = 0;
+    for (index, p) in prepared.iter().enumerate() {
+        let (camera, before) = cameras(&frames, &prepared, index);
+        let (whole_prev, compact_prev) = match &prev {
+            Some((w, c)) => (continued(w, before), continued(c, before)),
+            None => (None, None),
+        };
+        let whole = history::track(&camera, &p.depth, &p.motion, whole_prev, k, eps, tol);
+        let garbage = History {
+            positions: vec![[f32::NAN, 1e30, -7.0, 1.0]; k as usize * n],
+            track: vec![0xdead_beef; n],
+            dynamic: 12345,
+        };
+        let compact = Tracker {
+            camera: &camera,
+            depth: &p.depth,
+            motion: &p.motion,
+            prev: compact_prev.as_ref(),
+            k,
+            epsilon: eps,
+            tolerance: Some(tol),
+        }
+        .track_into(garbage);
+        assert_eq!(
+            bits(&compact.clone().expanded()),
+            bits(&whole),
+            "frame {index}"
+        );
+        // Trajectories longer than one that continue a static pixel.
+        continued_chains += (0..n)
+            .filter(|&x| history::is_dynamic(whole.track[x]) && history::chain(whole.track[x]) > 1)
+            .count();
+        prev = Some((whole, compact));
+    }
+    assert!(continued_chains > 50, "{continued_chains} chains continued");
 }

@@ -165,7 +165,7 @@ impl Backend for CpuBackend {
 
     fn snapshot(&self) -> Result<Option<Snapshot>, FramegenError> {
         Ok(self.current.as_ref().map(|c| Snapshot {
-            positions: c.history.positions.clone(),
+            positions: c.history.clone().expanded().positions,
             track: c.history.track.clone(),
             background: background::seeded(c.background.texels.clone(), c.seeds()),
         }))

@@ -57,7 +57,8 @@ use crate::passes::common::lanes::{LANES, Lanes3, Projected4, cells, project4};
 pub struct PrevHistory<'a> {
     /// `C_{t−1}` relative to the current camera centre, at its image size.
     pub camera: PassCamera,
-    /// `k` planes of `width × height` positions (plane `i` is `P'_i`).
+    /// `k` planes of `width × height` positions (plane `i` is `P'_i`;
+    /// planes `1..` read only where a pixel is dynamic, [`History::position`]).
     pub positions: &'a [[f32; 4]],
     /// Track words.
     pub track: &'a [u32],
@@ -98,6 +99,38 @@ impl History {
             track: Vec::new(),
             dynamic: 0,
         }
+    }
+
+    /// Plane `i` of pixel `x` (`i < k`): `P_i`, which a pixel that is not
+    /// dynamic does not store beyond `P_0` ([`Tracker::track_into`]).
+    #[inline]
+    pub fn position(positions: &[[f32; 4]], track: &[u32], i: usize, x: usize) -> [f32; 4] {
+        let plane = if is_dynamic(track[x]) { i } else { 0 };
+        positions[plane * track.len() + x]
+    }
+
+    /// Every plane written: planes `1..` of each pixel that is not dynamic
+    /// hold its `P_0`, as [`track`] and the GPU kernel leave them.
+    pub fn expanded(mut self) -> Self {
+        use rayon::prelude::*;
+        let n = self.track.len();
+        if n == 0 {
+            return self;
+        }
+        let (p0, rest) = self.positions.split_at_mut(n);
+        let band = 16 * 1024;
+        for plane in rest.chunks_mut(n) {
+            (plane.par_chunks_mut(band).zip(p0.par_chunks(band)))
+                .zip(self.track.par_chunks(band))
+                .for_each(|((plane, p0), track)| {
+                    for ((p, p0), &word) in plane.iter_mut().zip(p0).zip(track) {
+                        if !is_dynamic(word) {
+                            *p = *p0;
+                        }
+                    }
+                });
+        }
+        self
     }
 }
 
@@ -141,7 +174,7 @@ pub fn track(
         epsilon,
         tolerance: Some(tolerance),
     };
-    tracker.track_into(History::empty())
+    tracker.track_into(History::empty()).expanded()
 }
 
 /// A band of rows for one task: its first pixel, its slice of every plane,
@@ -171,9 +204,15 @@ pub struct Tracker<'a> {
 impl Tracker<'_> {
     /// Algorithm 1 for every pixel, into the buffers of `reuse`, a history
     /// that is no longer needed (the CPU executor's frame before the
-    /// previous one), where their sizes fit: every element is written, so
-    /// they are not cleared first and no frame-sized allocation is made
-    /// again each frame.
+    /// previous one), where their sizes fit: every element read later is
+    /// written, so they are not cleared first and no frame-sized
+    /// allocation is made again each frame.
+    ///
+    /// A pixel that is not dynamic stores only `P_0`: its planes after it
+    /// would repeat it, and are left as they were (every reader takes
+    /// `P_0` for them, [`History::position`]; [`History::expanded`] writes
+    /// them). Most pixels are static, so at `k = 2` a frame of 16-byte
+    /// positions is not written (720p: 15 MB).
     pub fn track_into(&self, reuse: History) -> History {
         use rayon::prelude::*;
         let (n, k) = (self.depth.len(), self.k());
@@ -219,10 +258,10 @@ impl Tracker<'_> {
                         if group.len() == LANES
                             && let Some((words, p)) = self.track4(x, c0, y)
                         {
+                            // Static: `P_0` only (the planes after it
+                            // would repeat it).
                             for (l, (word, w)) in group.iter_mut().zip(words).enumerate() {
-                                for plane in planes.iter_mut() {
-                                    plane[first + c0 + l] = p[l];
-                                }
+                                planes[0][first + c0 + l] = p[l];
                                 *word = w;
                             }
                             continue;
@@ -232,7 +271,8 @@ impl Tracker<'_> {
                             let center = Vec2::new(c as f32 + 0.5, y);
                             // Every element is written, valid or not.
                             let w = self.track(start + first + c, center, &mut entries);
-                            for (plane, e) in planes.iter_mut().zip(&entries) {
+                            let stored = if is_dynamic(w) { planes.len() } else { 1 };
+                            for (plane, e) in planes.iter_mut().zip(&entries).take(stored) {
                                 plane[first + c] = *e;
                             }
                             *word = w;
@@ -396,7 +436,6 @@ impl Tracker<'_> {
                 }
             }
             if !is_static {
-                let prev_n = prev.track.len();
                 let mut len = 0usize;
                 if let Some(j) = found {
                     let prev_word = prev.track[j];
@@ -407,7 +446,8 @@ impl Tracker<'_> {
                     };
                     let limit = available.min(k - 1);
                     for i in 1..=limit {
-                        let q = rebase(prev.positions[(i - 1) * prev_n + j], shift(prev));
+                        let q = History::position(prev.positions, prev.track, i - 1, j);
+                        let q = rebase(q, shift(prev));
                         if q[3] != p[3] {
                             break;
                         }
@@ -669,7 +709,8 @@ mod tests {
                 };
                 let fast = t.track_into(History::empty());
                 let slow = one_by_one(&t);
-                assert_eq!(bits(&fast), bits(&slow), "k = {k}, {tolerance:?}");
+                let whole = fast.clone().expanded();
+                assert_eq!(bits(&whole), bits(&slow), "k = {k}, {tolerance:?}");
                 // Both paths were taken, and both confirmation outcomes.
                 let w = size.width as usize;
                 let groups = (0..n)

@@ -38,7 +38,8 @@ pub fn estimate(positions: &[[f32; 4]], track: &[u32], k: u32, alpha: f32) -> Ve
 /// Eq. 1 for pixel `x` of `k` planes of `track.len()` positions: one
 /// element of [`estimate`], for a pass that uses the position at α at once
 /// (the CPU executor's warp) instead of storing it. Reads `P_0` and, for a
-/// dynamic pixel only, `P_m` (a static pixel's planes repeat `P_0`): the
+/// dynamic pixel only, `P_m` (a static pixel's planes would repeat `P_0`,
+/// and the CPU executor's history does not store them): the
 /// same result as [`estimate_pixel`] over all `k` planes, at half the
 /// bytes read per pixel for `k = 2`.
 #[inline]
