@@ -510,7 +510,8 @@ pub fn collect_unseeded(
             carried,
         };
     };
-    // Step 1: level 0 holds the seeds.
+    // Step 1 stores nothing: level 0 holds the seeds where they are
+    // (`Current::Seeds`).
     use rayon::prelude::*;
     let shift = Vec3::from_slice(&prev.camera.eye[..3]);
     for l in 0..levels.count {
@@ -704,10 +705,10 @@ mod tests {
     use super::*;
 
     /// Four fragments at a time are judged as one by one, and against
-    /// level 0's seeds (read where they are) as against its texels: over fragments that
-    /// are points, skies, nothing or NaN, landing on and off the image, on
-    /// empty slots, on the same surface, behind it, and on slots whose
-    /// fragment has no depth (NaN).
+    /// level 0's seeds (read where they are) as against its texels: over
+    /// fragments that are points, skies, nothing or NaN, landing on and
+    /// off the image, on empty slots, on the same surface, behind it, and
+    /// on slots whose fragment has no depth (NaN).
     #[test]
     fn four_lanes_are_the_fragments_one_by_one() {
         let eye = [0.0, 1.0, 3.0];
