@@ -360,6 +360,7 @@ impl Executor for CpuBackend {
                 motion: &f.motion,
                 track: &s.history.track,
                 size,
+                planes: s.planes.usable(s.color.len()).then(|| s.planes.rgb()),
             };
             let prev = shading::Previous {
                 color: &p.color,

@@ -115,6 +115,11 @@ impl Planes {
         self.opaque &= c[3] == 1.0;
     }
 
+    /// The red, green and blue planes.
+    pub fn rgb(&self) -> [&[f32]; 3] {
+        [&self.red, &self.green, &self.blue]
+    }
+
     /// Whether these are the planes of an image of `n` pixels that runs
     /// can be taken from.
     pub fn usable(&self, n: usize) -> bool {
