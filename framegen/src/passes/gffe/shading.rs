@@ -334,8 +334,8 @@ pub fn ratio_into(
     out.resize(n, [0.0; 2]);
     luma.resize(n, 0.0);
     // The runs' cells are taken in 32-bit signed lanes (see `ratio_run`):
-    // frames up to 2²⁴ a side (any a stream may carry, `protocol`'s
-    // limits), the rest pixel by pixel.
+    // frames up to 2²⁴ a side (far beyond `protocol`'s default limits),
+    // larger ones pixel by pixel.
     let small = cur.size.0 <= 1 << 24 && cur.size.1 <= 1 << 24;
     let runs = prev.luma.len() == n && prev.depth.len() == n && small;
     // By rows: no division per pixel for its coordinates.
@@ -363,11 +363,12 @@ const RUN: usize = 64;
 
 /// [`ratio_at`] for the run of pixels from `(x0, y)` (`row.len()` of
 /// them, at most [`RUN`]), where `prev.luma` and `prev.depth` cover the
-/// frame and the frame is at most 2²⁴ pixels a side. First, without branches, each pixel's luminance and the pixel
-/// its aligned position falls in (or none: dynamic, no surface, outside);
-/// then that pixel's test, the pixels that fail it listed without
-/// branches; last, the listed pixels' footprints. Each value is made by
-/// the same operations as in `ratio_at`.
+/// frame and the frame is at most 2²⁴ pixels a side. First, without
+/// branches, each pixel's luminance and the pixel its aligned position
+/// falls in (or none: dynamic, no surface, outside); then that pixel's
+/// test, the pixels that fail it listed without branches; last, the
+/// listed pixels' footprints. Each value is made by the same operations
+/// as in `ratio_at`.
 fn ratio_run(
     (x0, y): (u32, u32),
     row: &mut [[f32; 2]],
