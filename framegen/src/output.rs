@@ -86,6 +86,27 @@ pub struct Rows<'a> {
 }
 
 impl Rows<'_> {
+    /// The band as it stands, read only.
+    pub fn band(&self) -> Band<'_> {
+        Band {
+            color: self.color,
+            depth: self.depth,
+            motion: self.motion,
+            mask: self.mask,
+        }
+    }
+
+    /// The same band, borrowed again (to write it, then read it).
+    pub fn reborrow(&mut self) -> Rows<'_> {
+        Rows {
+            first: self.first,
+            color: self.color,
+            depth: self.depth,
+            motion: self.motion,
+            mask: self.mask,
+        }
+    }
+
     /// The frame's pixel indices the band holds.
     pub fn pixels(&self) -> std::ops::Range<usize> {
         self.first..self.first + self.mask.len()
@@ -131,6 +152,21 @@ pub struct Band<'a> {
     pub motion: &'a [[f32; 2]],
     /// Where each came from ([`EMPTY`], [`WARPED`], ...).
     pub mask: &'a [u32],
+}
+
+/// Pixels [`holes_in`] tests together.
+const HOLE_RUN: usize = 64;
+
+/// The holes ([`EMPTY`]) of `mask`, the mask of the pixels from `first` on,
+/// in order: runs of pixels are tested together first (a loop the
+/// compiler vectorizes), since after the warp holes are few.
+pub fn holes_in(mask: &[u32], first: usize) -> impl Iterator<Item = usize> + '_ {
+    mask.chunks(HOLE_RUN).enumerate().flat_map(move |(r, run)| {
+        let any = run.iter().fold(false, |any, &m| any | (m == EMPTY));
+        let at = move |(i, &m): (usize, &u32)| (m == EMPTY).then_some(first + r * HOLE_RUN + i);
+        let holes = any.then(|| run.iter().enumerate().filter_map(at));
+        holes.into_iter().flatten()
+    })
 }
 
 /// A generated frame in the making (CPU reference).
@@ -185,23 +221,50 @@ impl Output {
     /// makes. For a pass that makes several pixels at once
     /// (`warp::resolve_runs`); [`Output::from_fn`] is one at a time.
     pub fn from_rows(width: u32, height: u32, band: impl Fn(Rows<'_>) + Sync + Send) -> Self {
+        let each = vec![(); Self::bands(width, height)];
+        Self::from_rows_with(width, height, each, |rows, ()| band(rows))
+    }
+
+    /// How many bands [`Output::from_rows`] makes a `width`×`height`
+    /// frame in, and how many pixels each holds (the last one fewer).
+    pub fn bands(width: u32, height: u32) -> usize {
+        let n = width as usize * height as usize;
+        n.div_ceil(Self::band_len(width, height))
+    }
+
+    /// Pixels of each band of [`Output::from_rows`].
+    pub fn band_len(width: u32, height: u32) -> usize {
+        crate::par::band(width as usize, width as usize * height as usize)
+    }
+
+    /// [`Output::from_rows`] with something of its own for each band:
+    /// `each[k]` ([`Output::bands`] of them) goes to the `k`-th band's
+    /// call, for what it makes alongside (`pack::resolved`).
+    pub fn from_rows_with<P: Send>(
+        width: u32,
+        height: u32,
+        each: Vec<P>,
+        band: impl Fn(Rows<'_>, P) + Sync + Send,
+    ) -> Self {
         let n = width as usize * height as usize;
         let e = Pixel::EMPTY;
         // Each band is filled with holes where it is made, while it is in
         // the cache (`par::bands4`), not in a pass over the whole frame
         // first (about 0.9 ms of a 720p warp on two cores).
-        let b = crate::par::band(width as usize, n);
+        let b = Self::band_len(width, height);
         let fill = (e.color, e.depth, e.motion, e.mask);
-        let planes = crate::par::bands4(n, b, fill, |k, color, depth, motion, mask| {
+        let make = |k, p, color: &mut _, depth: &mut _, motion: &mut _, mask: &mut _| {
             let first = k * b;
-            band(Rows {
+            let rows = Rows {
                 first,
                 color,
                 depth,
                 motion,
                 mask,
-            })
-        });
+            };
+            band(rows, p)
+        };
+        let planes = crate::par::bands4_with(n, b, fill, each, make);
         Self {
             width,
             height,
@@ -231,19 +294,12 @@ impl Output {
             .sum()
     }
 
-    /// Where the holes ([`EMPTY`]) are, in order, found on all cores. Runs
-    /// of pixels are tested together first (a loop the compiler
-    /// vectorizes): after the warp, holes are few.
+    /// Where the holes ([`EMPTY`]) are, in order, found on all cores
+    /// ([`holes_in`] of each run of pixels).
     pub fn holes(&self) -> Vec<usize> {
         use rayon::prelude::*;
-        const RUN: usize = 64;
-        (self.mask.par_chunks(RUN).enumerate())
-            .flat_map_iter(|(r, run)| {
-                let any = run.iter().fold(false, |any, &m| any | (m == EMPTY));
-                let at = move |(i, &m): (usize, &u32)| (m == EMPTY).then_some(r * RUN + i);
-                let holes = any.then(|| run.iter().enumerate().filter_map(at));
-                holes.into_iter().flatten()
-            })
+        (self.mask.par_chunks(HOLE_RUN).enumerate())
+            .flat_map_iter(|(r, run)| holes_in(run, r * HOLE_RUN))
             .collect()
     }
 

@@ -75,8 +75,37 @@ where
     C: Copy + Send + Sync,
     D: Copy + Send + Sync,
 {
+    let b = b.max(1);
+    let each = vec![(); n.div_ceil(b)];
+    bands4_with(n, b, fill, each, |k, (), a, bb, c, d| make(k, a, bb, c, d))
+}
+
+/// [`bands4`] with something of its own for each band: `each[k]` (one per
+/// band, `n.div_ceil(b)` of them) is handed to band `k`'s `make` too, so
+/// that a band can write other buffers split the same way (the packed
+/// frame made alongside a generated one, `pack::resolved`).
+///
+/// # Panics
+///
+/// If `each` does not hold one item per band (a caller's mistake: every
+/// band must be made for the buffers to be whole).
+pub fn bands4_with<P, A, B, C, D>(
+    n: usize,
+    b: usize,
+    fill: (A, B, C, D),
+    each: Vec<P>,
+    make: impl Fn(usize, P, &mut [A], &mut [B], &mut [C], &mut [D]) + Sync + Send,
+) -> (Vec<A>, Vec<B>, Vec<C>, Vec<D>)
+where
+    P: Send,
+    A: Copy + Send + Sync,
+    B: Copy + Send + Sync,
+    C: Copy + Send + Sync,
+    D: Copy + Send + Sync,
+{
     use rayon::prelude::*;
     let b = b.max(1);
+    assert_eq!(each.len(), n.div_ceil(b), "one item per band");
     let (mut a, mut bb, mut c, mut d) = (
         Vec::with_capacity(n),
         Vec::with_capacity(n),
@@ -87,18 +116,21 @@ where
         .zip(bb.spare_capacity_mut()[..n].par_chunks_mut(b))
         .zip(c.spare_capacity_mut()[..n].par_chunks_mut(b))
         .zip(d.spare_capacity_mut()[..n].par_chunks_mut(b))
+        .zip(each)
         .enumerate()
         .with_max_len(1)
-        .for_each(|(k, (((a, bb), c), d))| {
+        .for_each(|(k, ((((a, bb), c), d), p))| {
             make(
                 k,
+                p,
                 init(a, fill.0),
                 init(bb, fill.1),
                 init(c, fill.2),
                 init(d, fill.3),
             )
         });
-    // SAFETY: the bands cover the first `n` slots of each buffer and
+    // SAFETY: the bands cover the first `n` slots of each buffer (`each`
+    // has one item per band, checked above, so the zip drops none) and
     // `init` wrote every one of them; a panic in `make` propagates out of
     // `for_each` before this.
     unsafe {

@@ -12,7 +12,7 @@ use crate::input::Prepared;
 use crate::output::{EMPTY, Output};
 use crate::passes::common::lanes::LANES;
 use crate::passes::common::levels::Levels;
-use crate::passes::common::pack::Packed;
+use crate::passes::common::pack::{self, Packed};
 use crate::passes::common::resample::{Resample, Source};
 use crate::passes::common::resample_run::Planes;
 use crate::passes::common::splat;
@@ -97,6 +97,13 @@ pub struct CpuBackend {
     /// Or, made by `repeat`'s still copy of the whole frame, the packed
     /// frame itself, with the crop it is (`crop::still_packed`).
     copied: Option<(crop::Crop, Packed)>,
+    /// Whether the generated frame being made is handed over packed
+    /// ([`Backend::generate_packed`]): then the warp packs it as it
+    /// resolves it (`warp::resolve_packed`).
+    packing: bool,
+    /// That packing, with the holes the resolve left, the only pixels the
+    /// passes after it write: packed again at the end (`pack::repack`).
+    packed: Option<(Packed, Vec<usize>)>,
     /// GFFE's α, between `motion` and `warp`: eq. 1 is evaluated per
     /// pixel inside the warp's projection, so no frame of positions at α
     /// is stored.
@@ -141,12 +148,25 @@ impl Backend for CpuBackend {
     /// still copy made packed is handed over as it is, without an `f32`
     /// frame.
     fn generate_packed(&mut self, job: &Job) -> Result<(Packed, Option<Output>), FramegenError> {
-        crate::pipeline::passes(self, job)?;
+        self.packing = true;
+        let passes = crate::pipeline::passes(self, job);
+        self.packing = false;
+        passes?;
         if let Some((_, packed)) = self.copied.take() {
             return Ok((packed, None));
         }
         let out = self.finish()?;
-        Ok((crate::passes::common::pack::pack(&out), Some(out)))
+        let packed = match self.packed.take() {
+            // Packed as the warp resolved it; the holes it left since
+            // filled are packed again.
+            Some((mut packed, holes)) => {
+                pack::repack(&out, &mut packed, &holes);
+                debug_assert!(packed == pack::pack(&out), "only holes were written");
+                packed
+            }
+            None => pack::pack(&out),
+        };
+        Ok((packed, Some(out)))
     }
 
     fn reset(&mut self) {
@@ -395,6 +415,7 @@ impl Executor for CpuBackend {
             .retain(|p| matches!(p.pass, Pass::History | Pass::Background | Pass::Shading));
         self.out = None;
         self.copied = None;
+        self.packed = None;
         self.restore();
         Ok(())
     }
@@ -475,7 +496,8 @@ impl Executor for CpuBackend {
             .ok_or(FramegenError::PassOrder("warp() before motion()"))?;
         let landings = &mut self.landings;
         let runs = job.resample == Resample::CatmullRom;
-        let out = timed(&mut self.timings, Pass::Warp, || {
+        let packing = self.packing;
+        let (out, packed) = timed(&mut self.timings, Pass::Warp, || {
             // Planes the upload did not make (a plan without them): from
             // the colour as the warp takes it, shading-corrected.
             if runs && !cur.planes.usable(cur.color.len()) {
@@ -543,15 +565,23 @@ impl Executor for CpuBackend {
                 size: (w, h),
             };
             // The runs filter Catmull-Rom's taps (`resample_run.rs`).
-            let mut out = match runs {
-                true => warp::resolve_runs(&winners, source, &cur.planes, landing, how),
-                false => warp::resolve(&winners, source, landing, how),
+            let planes = runs.then_some(&cur.planes);
+            if packing {
+                let r = warp::resolve_packed(&winners, source, planes, landing, how);
+                let mut out = r.out;
+                warp::close_cracks_at(&mut out, &r.holes);
+                return (out, Some((r.packed, r.holes)));
+            }
+            let mut out = match planes {
+                Some(planes) => warp::resolve_runs(&winners, source, planes, landing, how),
+                None => warp::resolve(&winners, source, landing, how),
             };
             warp::close_cracks(&mut out);
-            out
+            (out, None)
         });
         self.restore();
         self.out = Some(out);
+        self.packed = packed;
         Ok(())
     }
 
@@ -587,8 +617,12 @@ impl Executor for CpuBackend {
         self.parts()?;
         let out = Self::output(&mut self.out)?;
         let scratch = &mut self.holes;
+        let resolved = self.packed.as_ref().map(|(_, holes)| holes);
         timed(&mut self.timings, Pass::Holes, || {
-            pushpull::fill(out, job.pushpull, scratch)
+            // The resolve's holes that are holes still, where it listed
+            // them.
+            let holes = resolved.map(|h| h.iter().copied().filter(|&t| out.mask[t] == EMPTY));
+            pushpull::fill_listed(out, job.pushpull, scratch, holes.map(Iterator::collect))
         });
         Ok(())
     }

@@ -17,7 +17,7 @@ use half::f16;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::input::{CONVERT_BLOCK, MAX_RADIANCE};
-use crate::output::{Band, Output, PixelSource};
+use crate::output::{Band, Output, PixelSource, Rows};
 
 /// A generated frame's buffers, packed.
 #[derive(Clone, Debug, PartialEq)]
@@ -57,9 +57,99 @@ pub fn pack(out: &Output) -> Packed {
     })
 }
 
+/// A frame made band by band by `band` ([`Output::from_rows`]) and packed
+/// as each band is made, while it is in the cache, instead of in a pass
+/// over the finished frame that reads it all back ([`pack`]), with the
+/// holes each band was left with. The passes after the warp's resolve
+/// write only holes (closing cracks, background fill, push-pull), so
+/// packing those pixels again ([`repack`]) gives [`pack`] of the frame they
+/// finish.
+#[derive(Debug)]
+pub struct Resolved {
+    /// The frame as `band` made it.
+    pub out: Output,
+    /// It packed.
+    pub packed: Packed,
+    /// Its holes ([`crate::output::EMPTY`]), in order.
+    pub holes: Vec<usize>,
+}
+
+/// [`Resolved`] of the `width`×`height` frame `band` makes.
+pub fn resolved(width: u32, height: u32, band: impl Fn(Rows<'_>) + Sync + Send) -> Resolved {
+    let n = width as usize * height as usize;
+    let b = Output::band_len(width, height);
+    let (mut color, mut depth) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut motion, mut mask) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut lists = vec![Vec::new(); Output::bands(width, height)];
+    // The packed buffers split into the output's bands, and a list of
+    // holes for each.
+    let each: Vec<_> = (color.spare_capacity_mut()[..n].chunks_mut(b))
+        .zip(depth.spare_capacity_mut()[..n].chunks_mut(b))
+        .zip(motion.spare_capacity_mut()[..n].chunks_mut(b))
+        .zip(mask.spare_capacity_mut()[..n].chunks_mut(b))
+        .zip(lists.iter_mut())
+        .collect();
+    let bands = each.len();
+    let out = Output::from_rows_with(width, height, each, |mut rows, ((((c, d), m), s), list)| {
+        use crate::par::init;
+        band(rows.reborrow());
+        let to = PackedBand {
+            color: init(c, [f16::ZERO; 4]),
+            depth: init(d, 0.0),
+            motion: init(m, [0.0; 2]),
+            mask: init(s, PixelSource::Filled),
+        };
+        let from = rows.band();
+        pack_band(from, to);
+        list.extend(crate::output::holes_in(from.mask, rows.pixels().start));
+    });
+    // `from_rows_with` takes one item per band and hands each to a call.
+    assert_eq!(bands, Output::bands(width, height));
+    // SAFETY: the bands cover the first `n` slots of each buffer (`n` cut
+    // in bands of `b`, as the output is), each handed to one call of the
+    // band loop, which wrote every slot (`init`) before it returned.
+    unsafe {
+        color.set_len(n);
+        depth.set_len(n);
+        motion.set_len(n);
+        mask.set_len(n);
+    }
+    Resolved {
+        out,
+        packed: Packed::of_planes(width, height, (color, depth, motion, mask)),
+        holes: lists.concat(),
+    }
+}
+
+/// Packs pixels `at` of `out` again into `packed`, [`pack`] of `out`
+/// everywhere else (see [`Resolved`]): afterwards it is [`pack`] of `out`.
+/// Indices outside the frame are skipped.
+pub fn repack(out: &Output, packed: &mut Packed, at: &[usize]) {
+    for &t in at {
+        let (Some(&c), Some(&d), Some(&m), Some(&s)) = (
+            out.color.get(t),
+            out.depth.get(t),
+            out.motion.get(t),
+            out.mask.get(t),
+        ) else {
+            continue;
+        };
+        if let (Some(pc), Some(pd), Some(pm), Some(ps)) = (
+            packed.color.get_mut(t),
+            packed.depth.get_mut(t),
+            packed.motion.get_mut(t),
+            packed.mask.get_mut(t),
+        ) {
+            *pc = packed_color(c);
+            *pd = packed_depth(d);
+            *pm = m.map(packed_motion);
+            *ps = PixelSource::from_mask(s);
+        }
+    }
+}
+
 /// A packed frame's colour of one pixel: [`radiance`], alpha 1, to the
 /// nearest `f16`.
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // tests only there
 #[inline]
 fn packed_color(c: [f32; 4]) -> [f16; 4] {
     let c = c.map(radiance);
@@ -194,14 +284,24 @@ fn made(
             },
         )
     });
-    let (color, depth, motion, mask) = planes;
-    Packed {
-        color,
-        depth,
-        motion,
-        mask,
-        width,
-        height,
+    Packed::of_planes(width, height, planes)
+}
+
+/// A packed frame's buffers, colour, depth, motion and source.
+type Planes = (Vec<[f16; 4]>, Vec<f32>, Vec<[f32; 2]>, Vec<PixelSource>);
+
+impl Packed {
+    /// The `width`×`height` frame of `planes`.
+    fn of_planes(width: u32, height: u32, planes: Planes) -> Self {
+        let (color, depth, motion, mask) = planes;
+        Self {
+            color,
+            depth,
+            motion,
+            mask,
+            width,
+            height,
+        }
     }
 }
 
@@ -419,5 +519,44 @@ mod tests {
             assert_eq!(bits(&f16c), bits(&blocks));
             assert_eq!(f16c, blocks);
         }
+    }
+
+    /// Packing each band as it is made, then the holes again once they are
+    /// filled, gives what packing the finished frame gives; the holes
+    /// listed are the frame's, across bands.
+    #[test]
+    fn packing_as_resolved_then_the_holes_again_is_packing() {
+        use crate::output::{CRACK, EMPTY, FILLED, Pixel, WARPED};
+        // Several bands, the last one short.
+        let (w, h) = (300u32, 130u32);
+        assert!(Output::bands(w, h) >= 3);
+        let pixel = |t: usize, mask| Pixel {
+            color: [t as f32 * 0.01, 0.5, -1.0, 1.0],
+            depth: 1.0 + t as f32,
+            motion: [t as f32 * 0.25, -0.5],
+            mask,
+        };
+        let r = resolved(w, h, |mut rows| {
+            for t in rows.pixels() {
+                // Holes scattered, and whole runs of them.
+                if t % 7 != 3 && !(5000..5200).contains(&t) {
+                    rows.set(t, pixel(t, WARPED));
+                }
+            }
+        });
+        assert_eq!(r.packed, pack(&r.out));
+        assert_eq!(r.holes, r.out.holes());
+        assert!(r.holes.contains(&3) && r.holes.contains(&5100));
+        let (mut out, mut packed) = (r.out, r.packed);
+        // The passes after the resolve fill some holes (not all).
+        for &t in r.holes.iter().filter(|&&t| t % 2 == 0) {
+            let p = pixel(t * 3, if t % 4 == 0 { CRACK } else { FILLED });
+            (out.color[t], out.depth[t], out.motion[t], out.mask[t]) =
+                (p.color, p.depth, p.motion, p.mask);
+        }
+        assert_ne!(packed, pack(&out));
+        repack(&out, &mut packed, &r.holes);
+        assert_eq!(packed, pack(&out));
+        assert!(out.mask.contains(&EMPTY));
     }
 }

@@ -399,14 +399,19 @@ enum Near {
 /// It gives up, `out` untouched, before that would take it past `budget`
 /// texel reads (large holes read deep texels, each pulled from many;
 /// many holes, many texels), or where there is no level 1. Giving up
-/// costs at most the budget, its planning (a read per texel planned) and
-/// the scan for holes.
-fn fill_near(out: &mut Output, layout: Levels, budget: usize, scratch: &mut Scratch) -> Near {
+/// costs at most the budget and its planning (a read per texel planned).
+/// `holes` are every hole of `out`, in order.
+fn fill_near(
+    out: &mut Output,
+    holes: Vec<usize>,
+    layout: Levels,
+    budget: usize,
+    scratch: &mut Scratch,
+) -> Near {
     use rayon::prelude::*;
     if layout.count < 2 {
         return Near::GaveUp(0);
     }
-    let holes = out.holes();
     // made[k − 1]: what is made of level k; empty[k]: the texels of level
     // k that read level k + 1 (the holes, then empty texels made).
     let mut made: Vec<Made> = Vec::new();
@@ -519,8 +524,23 @@ fn make(made: &mut [Made], layout: Levels, out: &Output) {
 /// writes only holes); one with few, small holes makes only the texels
 /// they read (`fill_near`), with `scratch` kept from frame to frame.
 pub fn fill(out: &mut Output, levels: u32, scratch: &mut Scratch) {
-    let holes = out.count(EMPTY);
-    if holes == 0 {
+    fill_listed(out, levels, scratch, None);
+}
+
+/// [`fill`] where `holes`, if given, lists every hole of `out` in order
+/// (the executor kept them from the warp's resolve), instead of a scan
+/// for them.
+pub fn fill_listed(
+    out: &mut Output,
+    levels: u32,
+    scratch: &mut Scratch,
+    holes: Option<Vec<usize>>,
+) {
+    let count = match &holes {
+        Some(list) => list.len(),
+        None => out.count(EMPTY),
+    };
+    if count == 0 {
         return;
     }
     let layout = layout(out.width, out.height, levels);
@@ -528,8 +548,12 @@ pub fn fill(out: &mut Output, levels: u32, scratch: &mut Scratch) {
     // Holes cost the near fill a read each at least (a texel of level 1 is
     // read by at most 16 holes, and reads four pixels): more than a
     // quarter of its budget go to the pyramid at once, without a list.
-    let few = holes <= budget / 4;
-    if !(few && matches!(fill_near(out, layout, budget, scratch), Near::Filled(_))) {
+    let few = count <= budget / 4;
+    let near = |out: &mut Output| {
+        let holes = holes.unwrap_or_else(|| out.holes());
+        fill_near(out, holes, layout, budget, scratch)
+    };
+    if !(few && matches!(near(out), Near::Filled(_))) {
         pyramid(out, layout);
     }
 }
@@ -715,9 +739,14 @@ mod tests {
                     let mut fast = out.clone();
                     fill(&mut fast, levels, &mut scratch);
                     assert_eq!(bits(&fast), bits(&slow), "{case}");
+                    // With the holes listed by the caller: the same.
+                    let mut listed = out.clone();
+                    fill_listed(&mut listed, levels, &mut scratch, Some(out.holes()));
+                    assert_eq!(bits(&listed), bits(&slow), "{case}");
                     // Near without a budget: wherever there is a level 1.
                     let mut near = out.clone();
-                    let filled = fill_near(&mut near, layout, usize::MAX, &mut scratch);
+                    let holes = near.holes();
+                    let filled = fill_near(&mut near, holes, layout, usize::MAX, &mut scratch);
                     let went = matches!(filled, Near::Filled(_));
                     assert_eq!(went, levels > 1, "{case}");
                     let expected = if went { &slow } else { &out };
@@ -748,13 +777,19 @@ mod tests {
         let out = frame(w, h, blocks);
         assert_eq!(out.count(EMPTY), 200 * 64);
         let mut near = out.clone();
-        match fill_near(&mut near, layout, budget, &mut scratch) {
+        match fill_near(&mut near, out.holes(), layout, budget, &mut scratch) {
             Near::GaveUp(spent) => assert!(spent <= budget, "{spent} > {budget}"),
             filled => panic!("{filled:?}"),
         }
         assert_eq!(bits(&near), bits(&out));
         // Without a budget it would have read four times as much.
-        match fill_near(&mut near.clone(), layout, usize::MAX, &mut scratch) {
+        match fill_near(
+            &mut near.clone(),
+            out.holes(),
+            layout,
+            usize::MAX,
+            &mut scratch,
+        ) {
             Near::Filled(spent) => assert!(spent > 4 * budget, "{spent}"),
             gave_up => panic!("{gave_up:?}"),
         }
@@ -762,7 +797,7 @@ mod tests {
         let sliver = |x: u32, y: u32| x < 4 || (x == 600 && y % 7 != 0) || (y == 300 && x % 3 == 0);
         let out = frame(w, h, sliver);
         let (mut near, mut slow) = (out.clone(), out.clone());
-        match fill_near(&mut near, layout, budget, &mut scratch) {
+        match fill_near(&mut near, out.holes(), layout, budget, &mut scratch) {
             Near::Filled(spent) => assert!(spent <= budget / 2, "{spent} of {budget}"),
             gave_up => panic!("{gave_up:?}"),
         }

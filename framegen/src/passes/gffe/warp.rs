@@ -21,9 +21,10 @@
 use glam::Vec2;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
-use crate::output::{CRACK, DisplayMap, GpuOutput, Output, Pixel, Rows, WARPED};
+use crate::output::{CRACK, DisplayMap, EMPTY, GpuOutput, Output, Pixel, Rows, WARPED};
 use crate::passes::common::camera::{Columns, PassCamera, cell};
 use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
+use crate::passes::common::pack;
 use crate::passes::common::resample::{self, Resample, Source};
 use crate::passes::common::resample_run::{self, Planes, RUN, max, min};
 use crate::passes::common::splat::{Candidate, Winners, depth_key};
@@ -143,23 +144,29 @@ fn resolve_with<F: Fn(usize) -> Vec2 + Sync + Send>(
     how: Resolve,
     isa: Isa,
 ) -> Output {
+    let resolver = Resolver::new(winners, source, planes, landing, how);
     let (width, height) = how.size;
-    let resolver = Resolver {
-        winners,
-        source,
-        planes: planes.filter(|p| p.usable(source.color.len())),
-        landing,
-        how,
-        per_pixel: Vec2::ONE / how.map.scale,
-        target: Columns::new(width),
-        image: Columns::new(source.size.0),
+    Output::from_rows(width, height, |rows| resolver.write(rows, isa))
+}
+
+/// [`resolve_runs`] from `planes`, [`resolve`] without them (the same
+/// frame), packed band by band as it is made, with its holes listed
+/// ([`pack::resolved`]): for an executor that hands the frame over packed
+/// (the CPU executor's `generate_packed`).
+pub fn resolve_packed(
+    winners: &Winners,
+    source: Source<'_>,
+    planes: Option<&Planes>,
+    landing: impl Fn(usize) -> Vec2 + Sync + Send,
+    how: Resolve,
+) -> pack::Resolved {
+    let isa = match planes {
+        Some(_) => Isa::detect(),
+        None => Isa::Baseline,
     };
-    Output::from_rows(width, height, |rows| match isa {
-        Isa::Baseline => resolver.band(rows),
-        // SAFETY: `Isa::detect` found AVX2 on this CPU.
-        #[cfg(target_arch = "x86_64")]
-        Isa::Avx2 => unsafe { resolver.band_avx2(rows) },
-    })
+    let resolver = Resolver::new(winners, source, planes, landing, how);
+    let (width, height) = how.size;
+    pack::resolved(width, height, |rows| resolver.write(rows, isa))
 }
 
 /// What [`resolve`] reads, and the band loop that writes its pixels.
@@ -175,7 +182,38 @@ struct Resolver<'a, F> {
     image: Columns,
 }
 
-impl<F: Fn(usize) -> Vec2> Resolver<'_, F> {
+impl<'a, F: Fn(usize) -> Vec2> Resolver<'a, F> {
+    /// What [`resolve`] of `how` reads, with the colour `planes` of
+    /// `source` where runs can be taken from them.
+    fn new(
+        winners: &'a Winners,
+        source: Source<'a>,
+        planes: Option<&'a Planes>,
+        landing: F,
+        how: Resolve,
+    ) -> Self {
+        Self {
+            winners,
+            source,
+            planes: planes.filter(|p| p.usable(source.color.len())),
+            landing,
+            how,
+            per_pixel: Vec2::ONE / how.map.scale,
+            target: Columns::new(how.size.0),
+            image: Columns::new(source.size.0),
+        }
+    }
+
+    /// Every pixel of a band of rows, compiled for `isa`.
+    fn write(&self, rows: Rows<'_>, isa: Isa) {
+        match isa {
+            Isa::Baseline => self.band(rows),
+            // SAFETY: `Isa::detect` found AVX2 on this CPU.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { self.band_avx2(rows) },
+        }
+    }
+
     /// Where target pixel `t`, won by `i`, takes its colour from.
     #[inline(always)]
     fn at(&self, t: usize, i: usize) -> Vec2 {
@@ -330,13 +368,22 @@ const PAIRS: [[(i32, i32); 2]; 4] = [
 
 /// CPU reference of `warp_cracks`.
 pub fn close_cracks(out: &mut Output) {
+    let holes = out.holes();
+    close_cracks_at(out, &holes);
+}
+
+/// [`close_cracks`] where `holes` lists every hole of `out`, as the
+/// resolve left them ([`resolve_packed`]), instead of a scan for them
+/// (an index that is not a hole of `out` is passed over).
+pub fn close_cracks_at(out: &mut Output, holes: &[usize]) {
     use rayon::prelude::*;
     let (w, h) = (out.width as i32, out.height as i32);
     let read = &*out;
     // Cracks are few: find them in parallel (reading only pixels that
     // were warped before, never one being written), then write them.
-    let fixes: Vec<(usize, [f32; 4], f32, [f32; 2])> = (read.holes().into_par_iter())
-        .filter_map(|t| {
+    let fixes: Vec<(usize, [f32; 4], f32, [f32; 2])> = (holes.par_iter())
+        .filter(|&&t| read.mask.get(t) == Some(&EMPTY))
+        .filter_map(|&t| {
             let (x, y) = ((t as i32) % w, (t as i32) / w);
             PAIRS.iter().find_map(|pair| {
                 let [a, b] = pair.map(|(dx, dy)| {
