@@ -589,6 +589,8 @@ impl Executor for CpuBackend {
         let cur = self.current.as_ref().ok_or(FramegenError::NoFrame)?;
         let out = Self::output(&mut self.out)?;
         let sparse = &mut self.sparse;
+        // The warp's resolve listed its holes where it packed.
+        let holes = self.packed.as_ref().map(|(_, holes)| holes.as_slice());
         timed(&mut self.timings, Pass::BgFill, || {
             let (bg, camera) = (&cur.background.texels, &cur.camera);
             let slots = 0..job.bg_target.total() as usize;
@@ -601,14 +603,18 @@ impl Executor for CpuBackend {
             // background was carried over (the history restarted: 800 k
             // fragments to project at 720p) that is worth asking first.
             let carried = &cur.background.carried;
-            if carried.len() > slots.len() / 8 && out.count(EMPTY) == 0 {
+            let none = || match holes {
+                Some(holes) => holes.iter().all(|&t| out.mask[t] != EMPTY),
+                None => out.count(EMPTY) == 0,
+            };
+            if carried.len() > slots.len() / 8 && none() {
                 return;
             }
             let won = sparse.take_listed(carried, slots, |ids| {
                 bgfill::candidates4(ids, bg, &job.target, &layout)
             });
             let won = |slot| won.get(slot);
-            bgfill::resolve_won(won, bg, job.bg_target, camera, job.map, out);
+            bgfill::resolve_won(won, bg, job.bg_target, camera, job.map, out, holes);
         });
         Ok(())
     }
