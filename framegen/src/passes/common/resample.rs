@@ -177,15 +177,17 @@ pub(crate) fn catmull_rom(f: f32) -> [f32; 4] {
     ]
 }
 
-/// `⌊v⌋` for `|v| < 2³¹` without a library call (baseline x86-64 has no
-/// rounding instruction): the truncation, one less for negative
-/// non-integers. NaN gives 0. Shading correction's per-pixel floors use
-/// it too (`floorf` is a call on this target and cost a tenth of the
-/// shading estimate).
+/// `⌊v⌋` as `v.floor() as i32` gives it (saturating, NaN 0) without a
+/// library call (baseline x86-64 has no rounding instruction): the
+/// truncation, one less for negative non-integers. Below −2³¹ the
+/// truncation is already `i32::MIN`, where one less would overflow (a
+/// panic in debug builds, `i32::MAX` in release): the subtraction
+/// saturates. Shading correction's per-pixel floors use it too (`floorf`
+/// is a call on this target and cost a tenth of the shading estimate).
 #[inline]
 pub(crate) fn floor(v: f32) -> i32 {
     let t = v as i32;
-    t - i32::from(v < t as f32)
+    t.saturating_sub(i32::from(v < t as f32))
 }
 
 /// The colour of `src` at continuous position `at` with filter `mode`,
@@ -551,6 +553,18 @@ mod tests {
             1.0,
             3.999_999_8,
             1e6 + 0.5,
+            // Where the truncation saturates, and beyond.
+            -2_147_483_648.0,
+            -2_147_483_904.0,
+            -3e9,
+            f32::MIN,
+            f32::NEG_INFINITY,
+            2_147_483_520.0,
+            2_147_483_648.0,
+            3e9,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NAN,
         ] {
             assert_eq!(floor(v), v.floor() as i32, "{v}");
         }
