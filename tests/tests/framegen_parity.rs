@@ -166,11 +166,8 @@ fn splat_winners_are_exact() {
     splat.encode(
         &Rec::new(&ctx, &pool),
         &mut enc,
-        &cbuf,
-        cands.len() as u64,
-        &keys,
-        &winners,
-        slots as u64,
+        (&cbuf, cands.len() as u64),
+        (&keys, &winners, slots as u64),
     );
     ctx.queue.submit([enc.finish()]);
     let gpu_keys: Vec<u32> = ctx.read_pod(&keys, slots).unwrap();
@@ -426,9 +423,7 @@ fn crop_matches() {
             &Rec::new(&ctx, &pool),
             &mut enc,
             &c,
-            &bufs[0],
-            &bufs[1],
-            &bufs[2],
+            (&bufs[0], &bufs[1], &bufs[2]),
             framegen::output::GpuOutput {
                 color: &oc,
                 depth: &od,

@@ -175,7 +175,13 @@ fn reprojection_matches() {
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         let pool = framegen::gpu::Pool::default();
         let gpu = framegen::gpu::Rec::new(&ctx, &pool);
-        gr.encode_project(&gpu, &mut enc, (w, h), 0.5, &motion, &depth, &uvb, &cands);
+        gr.encode_project(
+            &gpu,
+            &mut enc,
+            ((w, h), 0.5),
+            (&motion, &depth),
+            (&uvb, &cands),
+        );
         ctx.queue.submit([enc.finish()]);
         let gpu: Vec<framegen::passes::common::splat::Candidate> = ctx.read_pod(&cands, n).unwrap();
         let gpu_uv: Vec<[f32; 2]> = ctx.read_pod(&uvb, n).unwrap();

@@ -298,7 +298,7 @@ impl Generation {
         let (candidates, keys, winners) = (&self.candidates, &self.keys, &self.winners);
         p.kernels
             .splat
-            .encode(p.ctx, enc, candidates, sources, keys, winners, slots);
+            .encode(p.ctx, enc, (candidates, sources), (keys, winners, slots));
     }
 
     fn out(&self) -> GpuOutput<'_> {
@@ -800,15 +800,10 @@ impl Executor for GpuBackend {
             k.history.encode(
                 ctx,
                 enc,
-                &plan.camera,
-                &b.depth,
-                &b.motion,
+                (&plan.camera, &b.depth, &b.motion),
                 prev.map(|(cam, p)| (cam, p.history(), &p.depth)),
-                b.history(),
-                &i.dynamic,
-                plan.k,
-                plan.epsilon,
-                plan.confirm_tolerance(),
+                (b.history(), &i.dynamic),
+                (plan.k, plan.epsilon, plan.confirm_tolerance()),
             );
         })
     }
@@ -817,21 +812,16 @@ impl Executor for GpuBackend {
         let plan = *plan;
         self.record_ingest(Pass::Background, |ctx, k, i, enc| {
             let b = &i.buffers;
+            let scratch = (&i.keys, &i.winners, &i.candidates);
             k.background.encode(
                 ctx,
                 enc,
-                &k.splat,
-                &plan.camera,
-                &b.positions,
-                &b.track,
-                &i.uploaded,
-                plan.levels,
+                (&plan.camera, b.history(), &i.uploaded),
+                (plan.levels, plan.tolerance),
                 i.prev
                     .as_ref()
                     .map(|(cam, p)| (cam, p.levels, &p.background)),
-                &b.background,
-                (&i.keys, &i.winners, &i.candidates),
-                plan.tolerance,
+                (&b.background, &k.splat, scratch),
             );
         })
     }
@@ -943,7 +933,7 @@ impl Executor for GpuBackend {
             let out = p.g.out();
             p.kernels
                 .crop
-                .encode(p.ctx, enc, &crop, &c.color, &c.depth, &c.motion, out);
+                .encode(p.ctx, enc, &crop, (&c.color, &c.depth, &c.motion), out);
             if still {
                 enc.clear_buffer(&p.g.motion, 0, Some(u64::from(p.g.tn) * 8));
             }
@@ -977,16 +967,7 @@ impl Executor for GpuBackend {
         let alpha = job.alpha;
         self.record(Pass::Motion, |p, enc| {
             let c = p.cur;
-            p.kernels.motion.encode(
-                p.ctx,
-                enc,
-                &c.positions,
-                &c.track,
-                &p.g.next,
-                c.n,
-                c.k,
-                alpha,
-            );
+            (p.kernels.motion).encode(p.ctx, enc, c.history(), &p.g.next, (c.n, c.k, alpha));
         })
     }
 
@@ -1037,12 +1018,9 @@ impl Executor for GpuBackend {
             k.bgfill.encode_resolve(
                 p.ctx,
                 enc,
-                &params,
-                &c.background,
-                &g.keys,
-                &g.winners,
-                g.out(),
-                g.tn,
+                (&params, &c.background),
+                (&g.keys, &g.winners),
+                (g.out(), g.tn),
             );
         })
     }
@@ -1064,16 +1042,14 @@ impl Executor for GpuBackend {
             k.interp.encode_project(
                 p.ctx,
                 enc,
-                size,
-                alpha,
-                &c.motion,
-                &c.depth,
-                &g.next,
-                &g.candidates,
+                (size, alpha),
+                (&c.motion, &c.depth),
+                (&g.next, &g.candidates),
             );
             g.splat(p, enc, u64::from(c.n), u64::from(c.n));
+            let image = (size, &c.depth);
             k.interp
-                .encode_merge(p.ctx, enc, size, &c.depth, &g.winners, &g.next, g.out());
+                .encode_merge(p.ctx, enc, image, (&g.winners, &g.next), g.out());
         })
     }
 

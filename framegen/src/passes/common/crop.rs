@@ -184,16 +184,14 @@ impl GpuCrop {
         }
     }
 
-    /// Records the crop of the rendered buffers into `out`.
-    #[allow(clippy::too_many_arguments)]
+    /// Records the crop of the rendered buffers (colour, depth, motion)
+    /// into `out`.
     pub fn encode(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         c: &Crop,
-        color: &wgpu::Buffer,
-        depth: &wgpu::Buffer,
-        motion: &wgpu::Buffer,
+        (color, depth, motion): (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer),
         out: crate::output::GpuOutput<'_>,
     ) {
         let params = ctx.params(bytemuck::bytes_of(&Params {

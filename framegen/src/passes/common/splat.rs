@@ -543,18 +543,14 @@ impl GpuSplat {
         }
     }
 
-    /// Records the splat of `count` candidates into `slots` slots. `keys`
-    /// and `index` are cleared first.
-    #[allow(clippy::too_many_arguments)]
+    /// Records the splat of `count` candidates into `slots` slots (their
+    /// `keys` and `index`, cleared first).
     pub fn encode(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        candidates: &wgpu::Buffer,
-        count: u64,
-        keys: &wgpu::Buffer,
-        index: &wgpu::Buffer,
-        slots: u64,
+        (candidates, count): (&wgpu::Buffer, u64),
+        (keys, index, slots): (&wgpu::Buffer, &wgpu::Buffer, u64),
     ) {
         encoder.clear_buffer(keys, 0, Some(slots * 4));
         encoder.clear_buffer(index, 0, Some(slots * 4));

@@ -34,7 +34,10 @@ use crate::passes::common::camera::{PassCamera, rebase};
 use crate::passes::common::lanes::{LANES, Lanes3, cells4, project4};
 use crate::passes::common::levels::{Grid, Levels};
 use crate::passes::common::splat::{self, Candidate, depth_key};
-use crate::passes::gffe::history::{is_confirmed, is_dynamic};
+use crate::passes::gffe::history::{GpuHistoryBuffers, is_confirmed, is_dynamic};
+
+/// The GPU collection's scratch: keys, winners and candidates.
+type GpuScratch<'a> = (&'a wgpu::Buffer, &'a wgpu::Buffer, &'a wgpu::Buffer);
 
 /// Most background levels.
 pub const MAX_LEVELS: u32 = 4;
@@ -623,26 +626,22 @@ impl GpuBackground {
         }
     }
 
-    /// Records the collection. `color` is the rendered frame's as uploaded
-    /// (four `f16` a pixel); `bg` receives the new buffer (`levels`);
-    /// `keys`, `winners` and `candidates` are scratch of at least
-    /// `levels.total()` / previous level-0 length elements.
-    #[allow(clippy::too_many_arguments)]
+    /// Records the collection for the current frame: its camera, its
+    /// history (the seeds' positions and track words) and its colour as
+    /// uploaded (four `f16` a pixel), with `levels` and the depth
+    /// `tolerance`. `bg` receives the new buffer, splatted with `splat`
+    /// over `scratch` (`keys`, `winners` and `candidates`, of at least
+    /// `levels.total()` / previous level-0 length elements).
     pub fn encode(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        splat: &splat::GpuSplat,
-        camera: &PassCamera,
-        positions: &wgpu::Buffer,
-        track: &wgpu::Buffer,
-        color: &wgpu::Buffer,
-        levels: Levels,
+        (camera, seeds, color): (&PassCamera, GpuHistoryBuffers<'_>, &wgpu::Buffer),
+        (levels, tolerance): (Levels, f32),
         prev: Option<(&PassCamera, Levels, &wgpu::Buffer)>,
-        bg: &wgpu::Buffer,
-        scratch: (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer),
-        tolerance: f32,
+        (bg, splat, scratch): (&wgpu::Buffer, &splat::GpuSplat, GpuScratch<'_>),
     ) {
+        let (positions, track) = (seeds.positions, seeds.track);
         let total = u64::from(levels.total());
         encoder.clear_buffer(bg, 0, Some(total * std::mem::size_of::<Texel>() as u64));
         if levels.count == 0 {
@@ -687,7 +686,7 @@ impl GpuBackground {
             let count = u64::from(prev_levels.len(l));
             self.project
                 .dispatch(ctx, encoder, &[&p, prev_bg, bg, candidates], count);
-            splat.encode(ctx, encoder, candidates, count, keys, winners, total);
+            splat.encode(ctx, encoder, (candidates, count), (keys, winners, total));
             let start = levels.offset(l);
             let end = levels.offset((l + 2).min(levels.count));
             self.resolve.dispatch(

@@ -314,18 +314,15 @@ impl GpuBgFill {
         );
     }
 
-    /// Records the hole fill.
-    #[allow(clippy::too_many_arguments)]
+    /// Records the hole fill of the `pixels` of `out` from the texels
+    /// `bg`, by the splat's `keys` and `winners`.
     pub fn encode_resolve(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        params: &wgpu::Buffer,
-        bg: &wgpu::Buffer,
-        keys: &wgpu::Buffer,
-        winners: &wgpu::Buffer,
-        out: crate::output::GpuOutput<'_>,
-        pixels: u32,
+        (params, bg): (&wgpu::Buffer, &wgpu::Buffer),
+        (keys, winners): (&wgpu::Buffer, &wgpu::Buffer),
+        (out, pixels): (crate::output::GpuOutput<'_>, u32),
     ) {
         self.resolve.dispatch(
             ctx,

@@ -516,24 +516,20 @@ impl GpuHistory {
         }
     }
 
-    /// Records Algorithm 1. `prev` is the previous frame's camera, history
-    /// and depth, or `None` after a reset (its buffers are then not read;
-    /// the placeholder is bound in their place). `dynamic` receives the
-    /// count of dynamic pixels (atomic add; clear it first).
-    #[allow(clippy::too_many_arguments)]
+    /// Records Algorithm 1 for the current frame (its camera, depth and
+    /// motion) into `out`, with the settings `k`, `ε` and the confirmation
+    /// tolerance ([`Tracker`]'s). `prev` is the previous frame's camera,
+    /// history and depth, or `None` after a reset (its buffers are then
+    /// not read; the placeholder is bound in their place). `dynamic`
+    /// receives the count of dynamic pixels (atomic add; clear it first).
     pub fn encode(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        camera: &PassCamera,
-        depth: &wgpu::Buffer,
-        motion: &wgpu::Buffer,
+        (camera, depth, motion): (&PassCamera, &wgpu::Buffer, &wgpu::Buffer),
         prev: Option<(&PassCamera, GpuHistoryBuffers<'_>, &wgpu::Buffer)>,
-        out: GpuHistoryBuffers<'_>,
-        dynamic: &wgpu::Buffer,
-        k: u32,
-        epsilon: f32,
-        tolerance: Option<f32>,
+        (out, dynamic): (GpuHistoryBuffers<'_>, &wgpu::Buffer),
+        (k, epsilon, tolerance): (u32, f32, Option<f32>),
     ) {
         let (w, h) = (camera.width(), camera.height());
         let (prev_cam, pw, ph) = match &prev {

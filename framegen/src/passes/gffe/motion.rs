@@ -14,7 +14,7 @@ use glam::Vec3;
 
 use crate::gpu::{Binding, GpuContext, Kernel, Rec};
 use crate::passes::common::camera::W_POINT;
-use crate::passes::gffe::history::{MAX_HISTORY, chain, is_dynamic};
+use crate::passes::gffe::history::{GpuHistoryBuffers, MAX_HISTORY, chain, is_dynamic};
 
 /// Eq. 1 for one pixel. `planes` are `P_0..P_{k−1}` of the pixel.
 pub fn estimate_pixel(planes: &[[f32; 4]], track: u32, alpha: f32) -> [f32; 4] {
@@ -111,19 +111,17 @@ impl GpuMotion {
         }
     }
 
-    /// Records eq. 1 for `n` pixels into `next` (`vec4<f32>` per pixel).
-    #[allow(clippy::too_many_arguments)]
+    /// Records eq. 1 for the `n` pixels of `history` (`k` planes) at
+    /// `alpha` into `next` (`vec4<f32>` per pixel).
     pub fn encode(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        positions: &wgpu::Buffer,
-        track: &wgpu::Buffer,
+        history: GpuHistoryBuffers<'_>,
         next: &wgpu::Buffer,
-        n: u32,
-        k: u32,
-        alpha: f32,
+        (n, k, alpha): (u32, u32, f32),
     ) {
+        let (positions, track) = (history.positions, history.track);
         let params = ctx.params(bytemuck::bytes_of(&Params {
             config: [n, k.max(1), 0, 0],
             motion: [alpha, 0.0, 0.0, 0.0],

@@ -136,18 +136,15 @@ impl GpuReproject {
         }))
     }
 
-    /// Records normalize + project: `motion` (pixels) → `uv` → `candidates`.
-    #[allow(clippy::too_many_arguments)]
+    /// Records normalize + project of a `width`×`height` frame's `motion`
+    /// (pixels) and `depth` at `alpha`: `motion` → `uv` → `candidates`.
     pub fn encode_project(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        (width, height): (u32, u32),
-        alpha: f32,
-        motion: &wgpu::Buffer,
-        depth: &wgpu::Buffer,
-        uv: &wgpu::Buffer,
-        candidates: &wgpu::Buffer,
+        ((width, height), alpha): ((u32, u32), f32),
+        (motion, depth): (&wgpu::Buffer, &wgpu::Buffer),
+        (uv, candidates): (&wgpu::Buffer, &wgpu::Buffer),
     ) {
         let p = Self::params(ctx, width, height, alpha);
         let n = u64::from(width) * u64::from(height);
@@ -156,16 +153,14 @@ impl GpuReproject {
             .dispatch(ctx, encoder, &[&p, depth, uv, candidates], n);
     }
 
-    /// Records merge of the splat winners into `out`.
-    #[allow(clippy::too_many_arguments)]
+    /// Records merge of the splat `winners` (of the `uv` positions) of a
+    /// `width`×`height` frame of `depth` into `out`.
     pub fn encode_merge(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
-        (width, height): (u32, u32),
-        depth: &wgpu::Buffer,
-        winners: &wgpu::Buffer,
-        uv: &wgpu::Buffer,
+        ((width, height), depth): ((u32, u32), &wgpu::Buffer),
+        (winners, uv): (&wgpu::Buffer, &wgpu::Buffer),
         out: crate::output::GpuOutput<'_>,
     ) {
         let p = Self::params(ctx, width, height, 0.0);
