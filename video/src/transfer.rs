@@ -142,7 +142,8 @@ fn chroma_code(c: f32) -> u16 {
 }
 
 /// Linear RGBA `color` (`width × height`, row-major) as coded planes, into
-/// `out` (reused from frame to frame).
+/// `out` (reused from frame to frame), a row of chroma blocks at a time
+/// (the chroma block of a pixel a shift, not a division).
 ///
 /// # Panics
 /// If `color` does not hold `width × height` pixels (the caller validates).
@@ -151,7 +152,6 @@ pub fn to_planes(width: u32, height: u32, color: &[[f16; 4]], chroma: Chroma, ou
     assert_eq!(color.len(), w * h, "colour of {w}×{h} pixels");
     let (cw, ch) = coded_size(width, height, chroma);
     let (sx, sy) = chroma.subsampling();
-    let table = forward_table();
     out.width = cw;
     out.height = ch;
     out.chroma_width = cw / sx;
@@ -159,30 +159,54 @@ pub fn to_planes(width: u32, height: u32, color: &[[f16; 4]], chroma: Chroma, ou
     let chroma_len = (cw / sx) * (ch / sy);
     out.cb.resize(chroma_len, 0);
     out.cr.resize(chroma_len, 0);
-    // Chroma sums over each subsampling block, in display space.
-    let mut sums = vec![[0.0f32; 2]; out.chroma_width];
-    for by in 0..ch / sy {
-        sums.fill([0.0; 2]);
-        for dy in 0..sy {
-            let yy = by * sy + dy;
-            let src = &color[yy.min(h - 1) * w..][..w];
-            let row = &mut out.y[yy * cw..][..cw];
-            for (x, luma) in row.iter_mut().enumerate() {
-                let p = &src[x.min(w - 1)];
-                let [r, g, b] = [0, 1, 2].map(|c| table[usize::from(p[c].to_bits())]);
-                let l = KR * r + KG * g + KB * b;
-                *luma = code(l);
-                let s = &mut sums[x / sx];
-                s[0] += (b - l) / (2.0 * (1.0 - KB));
-                s[1] += (r - l) / (2.0 * (1.0 - KR));
-            }
+    if chroma_len == 0 {
+        return;
+    }
+    let chroma_width = out.chroma_width;
+    let mut sums = vec![[0.0f32; 2]; chroma_width];
+    let blocks = (out.y.chunks_mut(cw * sy))
+        .zip(out.cb.chunks_mut(chroma_width))
+        .zip(out.cr.chunks_mut(chroma_width));
+    for (by, ((luma, cb), cr)) in blocks.enumerate() {
+        let rows = (by * sy..by * sy + sy).map(|yy| &color[yy.min(h - 1) * w..][..w]);
+        match chroma {
+            Chroma::Yuv420 => code_blocks::<2>(rows, luma, (cb, cr), &mut sums),
+            Chroma::Yuv444 => code_blocks::<1>(rows, luma, (cb, cr), &mut sums),
         }
-        let n = (sx * sy) as f32;
-        let at = by * out.chroma_width;
-        for (i, s) in sums.iter().enumerate() {
-            out.cb[at + i] = chroma_code(s[0] / n);
-            out.cr[at + i] = chroma_code(s[1] / n);
+    }
+}
+
+/// One row of chroma blocks `S` pixels a side: the `S` rows of colour
+/// `rows` into the luma rows `luma` (the coded width each, edges
+/// replicated) and the chroma rows `cb` and `cr`. Chroma sums over each
+/// block in display space, in the pixels' row-major order (`sums`: one
+/// per block, scratch).
+#[inline]
+fn code_blocks<'a, const S: usize>(
+    rows: impl Iterator<Item = &'a [[f16; 4]]>,
+    luma: &mut [u16],
+    (cb, cr): (&mut [u16], &mut [u16]),
+    sums: &mut [[f32; 2]],
+) {
+    let table = forward_table();
+    let cw = luma.len() / S;
+    sums.fill([0.0; 2]);
+    for (src, row) in rows.zip(luma.chunks_exact_mut(cw)) {
+        let w = src.len();
+        for (x, luma) in row.iter_mut().enumerate() {
+            let p = &src[x.min(w - 1)];
+            let [r, g, b] = [0, 1, 2].map(|c| table[usize::from(p[c].to_bits())]);
+            let l = KR * r + KG * g + KB * b;
+            *luma = code(l);
+            let s = &mut sums[x / S];
+            s[0] += (b - l) / (2.0 * (1.0 - KB));
+            s[1] += (r - l) / (2.0 * (1.0 - KR));
         }
+    }
+    let n = (S * S) as f32;
+    for ((s, cb), cr) in sums.iter().zip(cb.iter_mut()).zip(cr.iter_mut()) {
+        *cb = chroma_code(s[0] / n);
+        *cr = chroma_code(s[1] / n);
     }
 }
 
@@ -216,7 +240,8 @@ pub fn peak(color: &[[f16; 4]]) -> f16 {
 }
 
 /// Coded planes back to linear RGBA `width × height` (the frame's size, at
-/// most the coded size), each channel at most `peak`, into `out`.
+/// most the coded size), each channel at most `peak`, into `out`, a row at
+/// a time (the chroma of a pixel a shift away, not a division).
 ///
 /// # Panics
 /// If the planes are smaller than the frame or than their stated size (the
@@ -230,36 +255,64 @@ pub fn from_planes(
     out: &mut Vec<[f16; 4]>,
 ) {
     let (w, h) = (width as usize, height as usize);
-    let (sx, sy) = chroma.subsampling();
+    let (_, sy) = chroma.subsampling();
     assert!(
         w <= planes.width && h <= planes.height,
         "frame within the picture"
     );
-    let inverse = inverse_table();
     let peak = if peak.is_finite() && peak > f16::ZERO {
         peak
     } else {
         f16::ZERO
     };
+    out.clear();
+    out.resize(w * h, [f16::ZERO; 4]);
+    if w == 0 {
+        return;
+    }
+    for (y, row) in out.chunks_mut(w).enumerate() {
+        let luma = &planes.y[y * planes.width..][..w];
+        let at = (y / sy) * planes.chroma_width;
+        let span = at..at + planes.chroma_width;
+        let (cb, cr) = (&planes.cb[span.clone()], &planes.cr[span]);
+        match chroma {
+            Chroma::Yuv420 => linear_row::<2>(luma, (cb, cr), peak, row),
+            Chroma::Yuv444 => linear_row::<1>(luma, (cb, cr), peak, row),
+        }
+    }
+}
+
+/// One row of [`from_planes`]: the luma codes `luma` and the chroma codes
+/// of their row (`cb`, `cr`, a code per `S` pixels) into linear light at
+/// most `peak` (finite, not negative).
+#[inline]
+fn linear_row<const S: usize>(
+    luma: &[u16],
+    (cb, cr): (&[u16], &[u16]),
+    peak: f16,
+    out: &mut [[f16; 4]],
+) {
+    let inverse = inverse_table();
+    // The table holds finite values that are not negative, as `peak` is:
+    // their order is that of their bits.
+    let peak = peak.to_bits();
     let lin = |v: f32| {
         let x = inverse[(v.clamp(0.0, 1.0) * INVERSE_STEPS as f32 + 0.5) as usize];
-        if x > peak { peak } else { x }
+        if x.to_bits() > peak {
+            f16::from_bits(peak)
+        } else {
+            x
+        }
     };
     let one = f16::ONE;
-    out.clear();
-    out.reserve(w * h);
-    for y in 0..h {
-        let luma = &planes.y[y * planes.width..][..w];
-        let row = (y / sy) * planes.chroma_width;
-        for (x, &l) in luma.iter().enumerate() {
-            let l = f32::from(l) / MAX_CODE;
-            let cb = (f32::from(planes.cb[row + x / sx]) - CHROMA_ZERO) / MAX_CODE;
-            let cr = (f32::from(planes.cr[row + x / sx]) - CHROMA_ZERO) / MAX_CODE;
-            let r = l + 2.0 * (1.0 - KR) * cr;
-            let b = l + 2.0 * (1.0 - KB) * cb;
-            let g = (l - KR * r - KB * b) / KG;
-            out.push([lin(r), lin(g), lin(b), one]);
-        }
+    for (x, (o, &l)) in out.iter_mut().zip(luma).enumerate() {
+        let l = f32::from(l) / MAX_CODE;
+        let cb = (f32::from(cb[x / S]) - CHROMA_ZERO) / MAX_CODE;
+        let cr = (f32::from(cr[x / S]) - CHROMA_ZERO) / MAX_CODE;
+        let r = l + 2.0 * (1.0 - KR) * cr;
+        let b = l + 2.0 * (1.0 - KB) * cb;
+        let g = (l - KR * r - KB * b) / KG;
+        *o = [lin(r), lin(g), lin(b), one];
     }
 }
 
@@ -284,6 +337,109 @@ mod tests {
     /// each off by ≤ half a code; blue gathers the most through the inverse
     /// matrix, `½(1 + 2(1 − Kb))` codes), plus the inverse table's step and
     /// the rounding of linear light to `f16` (≤ 2⁻¹² in display space).
+    /// [`to_planes`] by the formulas alone, a coded sample at a time: each
+    /// luma code from its pixel (edges replicated), each chroma code from
+    /// the sum over its block, taken in row-major order.
+    fn to_planes_sample_by_sample(w: u32, h: u32, color: &[[f16; 4]], chroma: Chroma) -> Planes {
+        let (cw, ch) = coded_size(w, h, chroma);
+        let (sx, sy) = chroma.subsampling();
+        let display = |x: usize, y: usize| {
+            let p = color[y.min(h as usize - 1) * w as usize + x.min(w as usize - 1)];
+            [0, 1, 2].map(|c| forward_table()[usize::from(p[c].to_bits())])
+        };
+        let luma = |[r, g, b]: [f32; 3]| KR * r + KG * g + KB * b;
+        let mut planes = Planes {
+            width: cw,
+            height: ch,
+            chroma_width: cw / sx,
+            y: (0..cw * ch)
+                .map(|i| code(luma(display(i % cw, i / cw))))
+                .collect(),
+            ..Planes::default()
+        };
+        for i in 0..(cw / sx) * (ch / sy) {
+            let (bx, by) = (i % (cw / sx), i / (cw / sx));
+            let mut sum = [0.0f32; 2];
+            for (dx, dy) in (0..sy).flat_map(|dy| (0..sx).map(move |dx| (dx, dy))) {
+                let [r, g, b] = display(bx * sx + dx, by * sy + dy);
+                let l = luma([r, g, b]);
+                sum[0] += (b - l) / (2.0 * (1.0 - KB));
+                sum[1] += (r - l) / (2.0 * (1.0 - KR));
+            }
+            let n = (sx * sy) as f32;
+            planes.cb.push(chroma_code(sum[0] / n));
+            planes.cr.push(chroma_code(sum[1] / n));
+        }
+        planes
+    }
+
+    /// Pixel `(x, y)` of [`from_planes`], by the formulas alone: its codes
+    /// read where they are (the chroma's by division), the inverse table,
+    /// the peak (sanitised as `from_planes` does) as an `f16` comparison.
+    fn linear_pixel(
+        planes: &Planes,
+        (x, y): (usize, usize),
+        chroma: Chroma,
+        peak: f16,
+    ) -> [f16; 4] {
+        let (sx, sy) = chroma.subsampling();
+        let peak = if peak.is_finite() && peak > f16::ZERO {
+            peak
+        } else {
+            f16::ZERO
+        };
+        let lin = |v: f32| {
+            let x = inverse_table()[(v.clamp(0.0, 1.0) * INVERSE_STEPS as f32 + 0.5) as usize];
+            if x > peak { peak } else { x }
+        };
+        let at = (y / sy) * planes.chroma_width + x / sx;
+        let l = f32::from(planes.y[y * planes.width + x]) / MAX_CODE;
+        let cb = (f32::from(planes.cb[at]) - CHROMA_ZERO) / MAX_CODE;
+        let cr = (f32::from(planes.cr[at]) - CHROMA_ZERO) / MAX_CODE;
+        let r = l + 2.0 * (1.0 - KR) * cr;
+        let b = l + 2.0 * (1.0 - KB) * cb;
+        let g = (l - KR * r - KB * b) / KG;
+        [lin(r), lin(g), lin(b), f16::ONE]
+    }
+
+    /// The coding and decoding row by row give the bits of the
+    /// formulas sample by sample above: both chroma modes, odd and even
+    /// sizes, special values, a peak below some of the light.
+    #[test]
+    fn rows_on_all_cores_are_the_pixels_one_by_one() {
+        for (w, h) in [(1, 1), (2, 2), (37, 21), (64, 9), (33, 48)] {
+            let mut color = image(w, h);
+            let specials = [
+                f16::NAN,
+                f16::INFINITY,
+                f16::NEG_INFINITY,
+                -f16::ONE,
+                f16::MAX,
+            ];
+            for (i, c) in color.iter_mut().enumerate().step_by(7) {
+                c[i % 3] = specials[i % specials.len()];
+            }
+            for chroma in [Chroma::Yuv420, Chroma::Yuv444] {
+                let mut rows = Planes::default();
+                to_planes(w, h, &color, chroma, &mut rows);
+                let samples = to_planes_sample_by_sample(w, h, &color, chroma);
+                assert_eq!(rows, samples, "{w}×{h} {chroma:?}");
+                for peak in [f16::ZERO, f16::from_f32(0.7), f16::MAX, f16::NAN] {
+                    let mut a = vec![[f16::ONE; 4]; 3];
+                    from_planes(&rows, w, h, chroma, peak, &mut a);
+                    let b: Vec<_> = (0..(w * h) as usize)
+                        .map(|i| (i % w as usize, i / w as usize))
+                        .map(|at| linear_pixel(&rows, at, chroma, peak))
+                        .collect();
+                    let bits = |v: &[[f16; 4]]| {
+                        v.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>()
+                    };
+                    assert_eq!(bits(&a), bits(&b), "{w}×{h} {chroma:?} peak {peak}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn the_round_trip_is_within_the_quantisation_in_display_space() {
         let (w, h) = (37, 21);
