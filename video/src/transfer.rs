@@ -406,7 +406,7 @@ mod tests {
     /// formulas sample by sample above: both chroma modes, odd and even
     /// sizes, special values, a peak below some of the light.
     #[test]
-    fn rows_on_all_cores_are_the_pixels_one_by_one() {
+    fn rows_are_the_formulas_sample_by_sample() {
         for (w, h) in [(1, 1), (2, 2), (37, 21), (64, 9), (33, 48)] {
             let mut color = image(w, h);
             let specials = [
