@@ -122,25 +122,23 @@ pub fn prepare_into(frame: &Frame, reuse: Option<Prepared>) -> Prepared {
                 bad_color.fetch_add(u64::from(bad), Relaxed);
             }
         });
-    let depth_of = |d: f32| {
-        if d > 0.0 {
-            d
-        } else {
-            bad_depth.fetch_add(1, Relaxed);
-            0.0
-        }
-    };
-    // Collected where there is no buffer to reuse (written once either way).
-    let depth = match kept_depth.filter(|b| b.len() == frame.depth.len()) {
-        Some(mut kept) => {
-            kept.par_iter_mut()
-                .zip(&frame.depth)
-                .with_min_len(CONVERT_BLOCK)
-                .for_each(|(out, &d)| *out = depth_of(d));
-            kept
-        }
-        None => frame.depth.par_iter().map(|&d| depth_of(d)).collect(),
-    };
+    // In blocks with a count per block, as motion: a loop the compiler
+    // vectorises (a count per value, an atomic add, kept it scalar).
+    let mut depth = buffer(kept_depth, 0.0f32, frame.depth.len());
+    depth
+        .par_chunks_mut(CONVERT_BLOCK)
+        .zip(frame.depth.par_chunks(CONVERT_BLOCK))
+        .for_each(|(out, src)| {
+            let mut bad = 0u32;
+            for (o, &d) in out.iter_mut().zip(src) {
+                let surface = d > 0.0;
+                bad += u32::from(!surface);
+                *o = if surface { d } else { 0.0 };
+            }
+            if bad > 0 {
+                bad_depth.fetch_add(u64::from(bad), Relaxed);
+            }
+        });
     let limit = 4.0 * frame.meta.size.width.max(frame.meta.size.height) as f32;
     // Component by component in blocks, with a count per block: a loop the
     // compiler vectorises (a closure per component was not inlined).

@@ -123,9 +123,63 @@ pub fn resolved(width: u32, height: u32, band: impl Fn(Rows<'_>) + Sync + Send) 
 
 /// Packs pixels `at` of `out` again into `packed`, [`pack`] of `out`
 /// everywhere else (see [`Resolved`]): afterwards it is [`pack`] of `out`.
-/// Indices outside the frame are skipped.
+/// `at` is ascending (the holes as [`resolved`] lists them); indices
+/// outside the frame are skipped.
+///
+/// On all cores, band by band of the packed frame, each band with the
+/// stretch of `at` inside it: the listed pixels are scattered, and one by
+/// one they wait on the cache (about 80 ns each, 0.9 ms for the 10 000
+/// holes of a 720p default-scene frame on one core).
 pub fn repack(out: &Output, packed: &mut Packed, at: &[usize]) {
-    for &t in at {
+    use rayon::prelude::*;
+    debug_assert!(at.is_sorted(), "pixels listed in order");
+    let b = Output::band_len(packed.width, packed.height);
+    let Packed {
+        color,
+        depth,
+        motion,
+        mask,
+        ..
+    } = packed;
+    let bands = (color.par_chunks_mut(b))
+        .zip(depth.par_chunks_mut(b))
+        .zip(motion.par_chunks_mut(b))
+        .zip(mask.par_chunks_mut(b))
+        .enumerate();
+    bands.for_each(|(k, (((color, depth), motion), mask))| {
+        let band = PackedBand {
+            color,
+            depth,
+            motion,
+            mask,
+        };
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("f16c") {
+            // SAFETY: the CPU has both, just checked.
+            return unsafe { repack_band_f16c(out, band, k * b, at) };
+        }
+        repack_band(out, band, k * b, at, packed_color);
+    });
+}
+
+/// [`repack`] of the band from pixel `first`, its colour packed by
+/// `packed_color`.
+#[inline(always)]
+fn repack_band(
+    out: &Output,
+    band: PackedBand<'_>,
+    first: usize,
+    at: &[usize],
+    packed_color: impl Fn([f32; 4]) -> [f16; 4],
+) {
+    let PackedBand {
+        color,
+        depth,
+        motion,
+        mask,
+    } = band;
+    let from = |t: usize| at.partition_point(|&i| i < t);
+    for &t in &at[from(first)..from(first + color.len())] {
         let (Some(&c), Some(&d), Some(&m), Some(&s)) = (
             out.color.get(t),
             out.depth.get(t),
@@ -134,11 +188,12 @@ pub fn repack(out: &Output, packed: &mut Packed, at: &[usize]) {
         ) else {
             continue;
         };
+        let i = t - first;
         if let (Some(pc), Some(pd), Some(pm), Some(ps)) = (
-            packed.color.get_mut(t),
-            packed.depth.get_mut(t),
-            packed.motion.get_mut(t),
-            packed.mask.get_mut(t),
+            color.get_mut(i),
+            depth.get_mut(i),
+            motion.get_mut(i),
+            mask.get_mut(i),
         ) {
             *pc = packed_color(c);
             *pd = packed_depth(d);
@@ -146,6 +201,31 @@ pub fn repack(out: &Output, packed: &mut Packed, at: &[usize]) {
             *ps = PixelSource::from_mask(s);
         }
     }
+}
+
+/// [`repack_band`] with AVX2 and F16C: a pixel's colour sanitised and
+/// rounded to `f16` in one register (`vcvtps2ph`, to nearest even:
+/// [`packed_color`]'s bits), as [`pack_band_f16c`] packs two.
+///
+/// # Safety
+///
+/// The CPU has AVX2 and F16C.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,f16c")]
+unsafe fn repack_band_f16c(out: &Output, band: PackedBand<'_>, first: usize, at: &[usize]) {
+    use std::arch::x86_64::*;
+    let (zero, max) = (_mm_setzero_ps(), _mm_set1_ps(MAX_RADIANCE));
+    let (inf, one) = (_mm_set1_ps(f32::INFINITY), _mm_set1_ps(1.0));
+    repack_band(out, band, first, at, |c| {
+        // SAFETY: four `f32`s, 16 bytes, unaligned load.
+        let v = unsafe { _mm_loadu_ps(c.as_ptr()) };
+        let keep = _mm_and_ps(_mm_cmpgt_ps(v, zero), _mm_cmplt_ps(v, inf));
+        let clean = _mm_and_ps(keep, _mm_min_ps(v, max));
+        let opaque = _mm_blend_ps::<0b1000>(clean, one);
+        let half = _mm_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(opaque);
+        let bits = (_mm_cvtsi128_si64(half) as u64).to_le_bytes();
+        std::array::from_fn(|k| f16::from_le_bytes([bits[2 * k], bits[2 * k + 1]]))
+    });
 }
 
 /// A packed frame's colour of one pixel: [`radiance`], alpha 1, to the
@@ -458,31 +538,33 @@ mod tests {
         assert_eq!(p.color[3][2], f16::ZERO);
     }
 
+    /// Values that sanitising and rounding treat apart (NaN, infinities,
+    /// negatives, −0, subnormal and tie halves, beyond the largest `f16`).
+    const SPECIAL: [f32; 16] = [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -1.0,
+        -0.0,
+        0.0,
+        1e-7,
+        6.0e-8,
+        2.9802322e-8,
+        1.0 + 1.0 / 2048.0,
+        1.0 + 3.0 / 2048.0,
+        65504.0,
+        65520.0,
+        1e9,
+        MAX_RADIANCE,
+        0.333,
+    ];
+
     /// Every way of packing gives the same bits: the bands with and
-    /// without F16C, each pixel alone, over values that
-    /// sanitising and rounding treat apart (NaN, infinities, negatives,
-    /// −0, subnormal and tie halves, beyond the largest `f16`), an odd
+    /// without F16C, each pixel alone, over [`SPECIAL`] values, an odd
     /// number of pixels over several blocks.
     #[test]
     fn every_packing_gives_the_same_bits() {
-        let special = [
-            f32::NAN,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            -1.0,
-            -0.0,
-            0.0,
-            1e-7,
-            6.0e-8,
-            2.9802322e-8,
-            1.0 + 1.0 / 2048.0,
-            1.0 + 3.0 / 2048.0,
-            65504.0,
-            65520.0,
-            1e9,
-            MAX_RADIANCE,
-            0.333,
-        ];
+        let special = SPECIAL;
         let (w, h) = (1031u32, 3u32);
         let mut out = Output::empty(w, h);
         for t in 0..out.mask.len() {
@@ -522,8 +604,9 @@ mod tests {
     }
 
     /// Packing each band as it is made, then the holes again once they are
-    /// filled, gives what packing the finished frame gives; the holes
-    /// listed are the frame's, across bands.
+    /// filled (with [`SPECIAL`] colours), gives what packing the finished
+    /// frame gives, each hole's colour as [`packed_color`] packs it; the
+    /// holes listed are the frame's, across bands.
     #[test]
     fn packing_as_resolved_then_the_holes_again_is_packing() {
         use crate::output::{CRACK, EMPTY, FILLED, Pixel, WARPED};
@@ -551,12 +634,21 @@ mod tests {
         // The passes after the resolve fill some holes (not all).
         for &t in r.holes.iter().filter(|&&t| t % 2 == 0) {
             let p = pixel(t * 3, if t % 4 == 0 { CRACK } else { FILLED });
+            // Colours that sanitising and rounding treat apart.
+            let v = |k: usize| SPECIAL[(t / 2 + k * 5) % SPECIAL.len()];
             (out.color[t], out.depth[t], out.motion[t], out.mask[t]) =
-                (p.color, p.depth, p.motion, p.mask);
+                ([v(0), v(1), v(2), v(3)], p.depth, p.motion, p.mask);
         }
         assert_ne!(packed, pack(&out));
         repack(&out, &mut packed, &r.holes);
         assert_eq!(packed, pack(&out));
+        for &t in &r.holes {
+            assert_eq!(
+                packed.color[t].map(f16::to_bits),
+                packed_color(out.color[t]).map(f16::to_bits),
+                "pixel {t}"
+            );
+        }
         assert!(out.mask.contains(&EMPTY));
     }
 }
