@@ -47,13 +47,23 @@ use super::CodecError;
 
 /// The median edge detector's prediction of a value from its left (`a`),
 /// upper (`b`) and upper-left (`c`) neighbours: the median of `a`, `b` and
-/// `a + b − c`, i.e. `a + b − c` clamped to `[min(a, b), max(a, b)]` (if
-/// `c ≥ max(a, b)` the sum is at most `min(a, b)`, if `c ≤ min(a, b)` at
-/// least `max(a, b)`). Without branches, which the residuals' signs would
-/// defeat; the sum is taken in `i64`, so it never wraps.
+/// `a + b − c`, i.e. `min(a, b)` if `c ≥ max(a, b)`, `max(a, b)` if `c ≤
+/// min(a, b)`, else `a + b − c`, which then lies strictly between the two
+/// and so fits an `i32`: the wrapping sum is exact wherever it is taken.
+/// Selects on `i32` lanes (a clamp of the sum taken in `i64`, which
+/// SSE2 compares only by emulation, was a quarter of the motion and
+/// depth encoders' time).
+#[inline]
 fn med(a: i32, b: i32, c: i32) -> i32 {
-    let sum = i64::from(a) + i64::from(b) - i64::from(c);
-    sum.clamp(i64::from(a.min(b)), i64::from(a.max(b))) as i32
+    let (lo, hi) = (a.min(b), a.max(b));
+    let sum = a.wrapping_add(b).wrapping_sub(c);
+    if c >= hi {
+        lo
+    } else if c <= lo {
+        hi
+    } else {
+        sum
+    }
 }
 
 /// Walks `values` in order, rows `width` wide, calling `f(i, prediction,
@@ -420,19 +430,60 @@ mod tests {
         Ok(())
     }
 
+    /// The median of `a`, `b` and `a + b − c`, taken in `i64`.
+    fn median(a: i32, b: i32, c: i32) -> i64 {
+        let (a, b, c) = (i64::from(a), i64::from(b), i64::from(c));
+        let mut three = [a, b, a + b - c];
+        three.sort_unstable();
+        three[1]
+    }
+
     proptest! {
-        /// The clamp is LOCO-I's three cases.
+        /// The prediction is the median it is defined as.
         #[test]
         fn med_is_the_median_edge_detector(a in any::<i32>(), b in any::<i32>(), c in any::<i32>()) {
-            let expected = if c >= a.max(b) {
-                a.min(b)
-            } else if c <= a.min(b) {
-                a.max(b)
-            } else {
-                // c lies strictly between a and b: the result does too.
-                a.wrapping_add(b).wrapping_sub(c)
-            };
-            prop_assert_eq!(med(a, b, c), expected);
+            prop_assert_eq!(i64::from(med(a, b, c)), median(a, b, c));
+        }
+    }
+
+    /// At the extremes of `i32`, where `a + b − c` leaves it.
+    #[test]
+    fn med_is_the_median_at_the_extremes() {
+        let values = [
+            i32::MIN,
+            i32::MIN + 1,
+            -2,
+            -1,
+            0,
+            1,
+            2,
+            i32::MAX - 1,
+            i32::MAX,
+        ];
+        for a in values {
+            for b in values {
+                for c in values {
+                    assert_eq!(i64::from(med(a, b, c)), median(a, b, c), "{a} {b} {c}");
+                }
+            }
+        }
+    }
+
+    /// Every value lands at its column-major place, at sizes across the
+    /// bands of rows it copies by (one band, several, a partial last one).
+    #[test]
+    fn transposing_moves_each_value_to_its_column_order_place() {
+        for width in 1..=19usize {
+            for rows in 0..=70usize {
+                let values: Vec<u32> = (0..width * rows).map(|i| i as u32 * 7 + 1).collect();
+                let out = transpose(&values, width);
+                assert_eq!(out.len(), values.len());
+                for y in 0..rows {
+                    for x in 0..width {
+                        assert_eq!(out[x * rows + y], values[y * width + x], "{width}×{rows}");
+                    }
+                }
+            }
         }
     }
 
