@@ -287,11 +287,52 @@ pub(crate) fn unpack(encoded: &[u8], count: usize, width: usize) -> Result<Vec<i
     if order == Order::Columns {
         residuals = transpose(&residuals, count / width);
     }
-    let mut values = vec![0i32; count];
-    predict_rows(&mut values, width, |i, pred, value| {
-        *value = pred.wrapping_add(residuals[i]);
-    });
-    Ok(values)
+    Ok(unpredict(&residuals, width))
+}
+
+/// The values whose residuals (unzigzagged, row order, whole rows `width`
+/// wide) are `residuals`: each the prediction from the values before it
+/// plus its residual, as [`predict_rows`] walks them. Two rows at a time:
+/// a value waits on its left neighbour's (a chain of a few cycles a
+/// value), and the lower row's chain runs beside the upper row's, a value
+/// behind it (its upper neighbours are then made).
+fn unpredict(residuals: &[i32], width: usize) -> Vec<i32> {
+    let mut values = vec![0i32; residuals.len()];
+    let (Some(first), Some(r0)) = (values.get_mut(..width), residuals.get(..width)) else {
+        return values;
+    };
+    let mut left = 0i32;
+    for (v, &r) in first.iter_mut().zip(r0) {
+        left = left.wrapping_add(r);
+        *v = left;
+    }
+    let rows = residuals.len() / width;
+    let mut y = 1;
+    while y < rows {
+        let pair = (rows - y).min(2);
+        let (done, rest) = values.split_at_mut(y * width);
+        let up = &done[(y - 1) * width..];
+        let (a, b) = rest.split_at_mut(width);
+        let ra = &residuals[y * width..(y + 1) * width];
+        a[0] = up[0].wrapping_add(ra[0]);
+        if pair == 2 {
+            let (b, rb) = (
+                &mut b[..width],
+                &residuals[(y + 1) * width..(y + 2) * width],
+            );
+            b[0] = a[0].wrapping_add(rb[0]);
+            for x in 1..width {
+                a[x] = med(a[x - 1], up[x], up[x - 1]).wrapping_add(ra[x]);
+                b[x] = med(b[x - 1], a[x], a[x - 1]).wrapping_add(rb[x]);
+            }
+        } else {
+            for x in 1..width {
+                a[x] = med(a[x - 1], up[x], up[x - 1]).wrapping_add(ra[x]);
+            }
+        }
+        y += pair;
+    }
+    values
 }
 
 #[cfg(test)]
@@ -466,6 +507,24 @@ mod tests {
                 for c in values {
                     assert_eq!(i64::from(med(a, b, c)), median(a, b, c), "{a} {b} {c}");
                 }
+            }
+        }
+    }
+
+    /// Decoding two rows at a time gives the values [`predict_rows`] gives
+    /// one at a time, at every height (an odd last row) and narrow widths.
+    #[test]
+    fn rows_decoded_in_pairs_are_the_rows_one_by_one() {
+        for width in 1..=9usize {
+            for rows in 0..=7usize {
+                let residuals: Vec<i32> = (0..width * rows)
+                    .map(|i| (i as i32).wrapping_mul(-1_640_531_527) >> (i % 29))
+                    .collect();
+                let mut values = vec![0i32; residuals.len()];
+                predict_rows(&mut values, width, |i, pred, value| {
+                    *value = pred.wrapping_add(residuals[i]);
+                });
+                assert_eq!(unpredict(&residuals, width), values, "{width}×{rows}");
             }
         }
     }
