@@ -69,7 +69,10 @@ fn med(a: i32, b: i32, c: i32) -> i32 {
 
 /// Walks `values` in order, rows `width` wide, calling `f(i, prediction,
 /// value)` with the prediction from the values before it; `f` may write the
-/// value (the decoder does), which the next predictions then use.
+/// value (a decoder does), which the next predictions then use. The
+/// reference that the encoder's [`residuals`] and the decoder's
+/// [`unpredict`] are tested against.
+#[cfg(test)]
 fn predict_rows(values: &mut [i32], width: usize, mut f: impl FnMut(usize, i32, &mut i32)) {
     for start in (0..values.len()).step_by(width) {
         let (done, rest) = values.split_at_mut(start);
@@ -168,13 +171,25 @@ pub(crate) fn pack(values: &[i32], width: usize, level: i32) -> Result<Vec<u8>, 
 }
 
 /// The zigzagged residuals of `values` (whole rows `width` wide) against
-/// the median edge detector, in row order.
+/// the median edge detector, in row order: [`predict_rows`]' predictions,
+/// made from `values` as they are (the encoder writes none back), each
+/// row collected as it is made, without a copy of the values or a buffer
+/// filled first.
 fn residuals(values: &[i32], width: usize) -> Vec<u32> {
-    let mut scratch = values.to_vec();
-    let mut residuals = vec![0u32; values.len()];
-    predict_rows(&mut scratch, width, |i, pred, value| {
-        residuals[i] = zigzag(value.wrapping_sub(pred));
-    });
+    let mut residuals = Vec::with_capacity(values.len());
+    let mut rows = values.chunks_exact(width.max(1));
+    let Some(first) = rows.next() else {
+        return residuals;
+    };
+    let left = |row: &[i32], x: usize| if x == 0 { 0 } else { row[x - 1] };
+    residuals.extend((0..first.len()).map(|x| zigzag(first[x].wrapping_sub(left(first, x)))));
+    for (up, row) in values.chunks_exact(width.max(1)).zip(rows) {
+        residuals.push(zigzag(row[0].wrapping_sub(up[0])));
+        // Pairs of neighbours, without an index to check: a loop the
+        // compiler vectorises.
+        let pairs = row.windows(2).zip(up.windows(2));
+        residuals.extend(pairs.map(|(r, u)| zigzag(r[1].wrapping_sub(med(r[0], u[1], u[0])))));
+    }
     residuals
 }
 
@@ -507,6 +522,24 @@ mod tests {
                 for c in values {
                     assert_eq!(i64::from(med(a, b, c)), median(a, b, c), "{a} {b} {c}");
                 }
+            }
+        }
+    }
+
+    /// The encoder's residuals are each value less [`predict_rows`]'
+    /// prediction of it, zigzagged, at every height and narrow widths.
+    #[test]
+    fn residuals_are_the_values_less_their_predictions() {
+        for width in 1..=9usize {
+            for rows in 0..=5usize {
+                let mut values: Vec<i32> = (0..width * rows)
+                    .map(|i| (i as i32).wrapping_mul(-1_640_531_527) >> (i % 29))
+                    .collect();
+                let mut expected = vec![0u32; values.len()];
+                predict_rows(&mut values, width, |i, pred, value| {
+                    expected[i] = zigzag(value.wrapping_sub(pred));
+                });
+                assert_eq!(residuals(&values, width), expected, "{width}×{rows}");
             }
         }
     }
