@@ -312,6 +312,7 @@ pub(crate) fn unpack(encoded: &[u8], count: usize, width: usize) -> Result<Vec<i
 /// value), and the lower row's chain runs beside the upper row's, a value
 /// behind it (its upper neighbours are then made).
 fn unpredict(residuals: &[i32], width: usize) -> Vec<i32> {
+    let width = width.max(1);
     let mut values = vec![0i32; residuals.len()];
     let (Some(first), Some(r0)) = (values.get_mut(..width), residuals.get(..width)) else {
         return values;

@@ -101,7 +101,7 @@ unsafe fn widen_block_f16c(src: &[[f16; 4]], dst: &mut [[f32; 4]], rgb: [&mut [f
     let whole = n / 8 * 8;
     let one = _mm256_set1_ps(1.0);
     // After the shuffles a register holds a channel of pixels 0 2 4 6 1 3
-    // 5 7: lane i takes its pixel's value from `ORDER[i]`.
+    // 5 7: lane i of the channel takes lane `order[i]`.
     let order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
     let mut opaque = _mm256_cmp_ps::<_CMP_EQ_OQ>(one, one);
     for first in (0..whole).step_by(8) {
