@@ -322,7 +322,7 @@ fn main() -> Result<(), gpu_device::OneLine> {
         .init();
     // Frame-sized buffers are freed and allocated again every frame: keep
     // them in the heap instead of faulting fresh pages in each time.
-    framegen::memory::retain_freed_memory();
+    protocol::memory::retain_freed_memory();
     Ok(command(Cli::parse())?)
 }
 

@@ -15,7 +15,6 @@ pub mod exec;
 pub mod generator;
 pub mod gpu;
 pub mod input;
-pub mod memory;
 pub mod method;
 pub mod metrics;
 pub mod oracle;

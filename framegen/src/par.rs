@@ -25,7 +25,7 @@ pub fn band(width: usize, n: usize) -> usize {
 /// `n` copies of `value`, written on all cores: a frame-sized buffer is
 /// tens of megabytes, and one core alone fills it at a fraction of the
 /// memory bandwidth (heap memory kept by
-/// [`crate::memory::retain_freed_memory`] is not zeroed by the kernel).
+/// [`protocol::memory::retain_freed_memory`] is not zeroed by the kernel).
 pub fn filled<T: Copy + Send + Sync>(value: T, n: usize) -> Vec<T> {
     use rayon::prelude::*;
     let mut v = Vec::with_capacity(n);

@@ -37,6 +37,7 @@ pub mod dump;
 pub mod effects;
 pub mod frame;
 pub mod import;
+pub mod memory;
 pub mod wire;
 
 pub use camera::{Camera, Pose, Projected, Projection, Window, WorldPoint};

@@ -26,6 +26,9 @@ fn size() -> FrameSize {
 }
 
 fn codecs(c: &mut Criterion) {
+    // As the binaries do: the encoders' frame-sized buffers stay in the
+    // heap from one frame to the next.
+    protocol::memory::retain_freed_memory();
     let size = size();
     let scene = Scene::load("builtin:default").expect("built-in scene");
     let mut r = Renderer::new(scene, size, Path::new(".")).expect("renderer");

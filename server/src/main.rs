@@ -192,6 +192,10 @@ fn main() -> Result<(), gpu_device::OneLine> {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .init();
+    // The renderer's readback and the encoders free and allocate
+    // frame-sized buffers every frame: keep them in the heap instead of
+    // faulting fresh pages in each time.
+    protocol::memory::retain_freed_memory();
     Ok(command(Cli::parse())?)
 }
 

@@ -1,11 +1,11 @@
 //! Keeping freed frame-sized buffers in the process's heap, so that the next
 //! frame reuses them instead of faulting fresh pages in.
 //!
-//! Every push and every generation of the CPU executor allocates and frees
-//! frame-sized buffers (the prepared inputs, the history planes, the
+//! Every push and every generation of the CPU frame generator allocates and
+//! frees frame-sized buffers (the prepared inputs, the history planes, the
 //! background layers, the splat's winners, the generated frame and its f16
 //! copy: some 250 MB per gffe frame at 1280×720), and so do the client's
-//! decoder and presenter. glibc serves allocations above its mmap threshold
+//! decoder and presenter, and the server's readback and encoders. glibc serves allocations above its mmap threshold
 //! (128 KiB, adapting up to 32 MiB) with fresh mappings and unmaps them on
 //! `free`, so each frame's buffers are faulted in and zeroed again, page by
 //! page: `perf` put a fifth of gffe's CPU time at 720p in the kernel's
@@ -14,8 +14,9 @@
 //! next frame. The price is that the heap does not shrink below its peak.
 //!
 //! A process-wide setting: binaries call it once at start-up (the client,
-//! whose demo also runs the server in-process, and the framegen bench);
-//! libraries never do.
+//! whose demo also runs the server in-process, the server, and the
+//! benches); libraries never do. It lives here, at the bottom of the
+//! crates, so that every binary can reach it.
 
 /// Blocks up to this size come from the heap and stay there when freed
 /// (larger than any frame buffer up to 8K × 8K × 16 B).
