@@ -356,25 +356,12 @@ pub fn run(
     };
     let stride = w as usize;
     let base = (top - 1) as usize * stride + (start - 1) as usize;
-    let rows = 4 + usize::from(sy);
     const WIDE: usize = SPAN + 1;
     match (sx, sy) {
-        (false, false) => {
-            let (depth, colour) = window::<SPAN>(src, planes, base, stride, rows)?;
-            lanes.filter::<SPAN, false, false>(depth, colour)
-        }
-        (false, true) => {
-            let (depth, colour) = window::<SPAN>(src, planes, base, stride, rows)?;
-            lanes.filter::<SPAN, false, true>(depth, colour)
-        }
-        (true, false) => {
-            let (depth, colour) = window::<WIDE>(src, planes, base, stride, rows)?;
-            lanes.filter::<WIDE, true, false>(depth, colour)
-        }
-        (true, true) => {
-            let (depth, colour) = window::<WIDE>(src, planes, base, stride, rows)?;
-            lanes.filter::<WIDE, true, true>(depth, colour)
-        }
+        (false, false) => lanes.filter_at::<SPAN, false, false>(src, planes, base, stride),
+        (false, true) => lanes.filter_at::<SPAN, false, true>(src, planes, base, stride),
+        (true, false) => lanes.filter_at::<WIDE, true, false>(src, planes, base, stride),
+        (true, true) => lanes.filter_at::<WIDE, true, true>(src, planes, base, stride),
     }
 }
 
@@ -393,6 +380,22 @@ struct RunLanes<'a> {
 }
 
 impl RunLanes<'_> {
+    /// [`RunLanes::filter`] of the window whose first tap is at `base`
+    /// (rows `stride` apart): rows of `N` taps, four of them, or five in
+    /// a run shifted in y (`SY`).
+    #[inline(always)]
+    fn filter_at<const N: usize, const SX: bool, const SY: bool>(
+        &self,
+        src: Source<'_>,
+        planes: &Planes,
+        base: usize,
+        stride: usize,
+    ) -> Option<Run> {
+        let rows = if SY { ROWS } else { ROWS - 1 };
+        let (depth, colour) = window::<N>(src, planes, base, stride, rows)?;
+        self.filter::<N, SX, SY>(depth, colour)
+    }
+
     /// The run's colours from its taps: `depth` and the colour planes'
     /// rows of `N`, lane `l`'s tap `(i, j)` at [`tap`]`(rows, i, j, l,
     /// shift)`.
