@@ -314,8 +314,8 @@ impl<'a, F: Fn(usize) -> Vec2> Resolver<'a, F> {
         let map = self.how.map;
         for l in 0..RUN {
             let c = match &colors {
-                Some(r) if r.taken[l] => [r.colors[0][l], r.colors[1][l], r.colors[2][l]],
-                _ => resample::resample(self.source, first + l, at[l], filter),
+                Some(c) => [c[0][l], c[1][l], c[2][l]],
+                None => resample::resample(self.source, first + l, at[l], filter),
             };
             color[l] = [c[0], c[1], c[2], 1.0];
             depth[l] = self.winners.depth(t + l).unwrap_or(f32::INFINITY);
