@@ -111,8 +111,9 @@ pub struct SessionStats {
 /// A complete, decoded frame and when it got there.
 #[derive(Debug)]
 pub struct Arrived {
-    /// The frame.
-    pub frame: Frame,
+    /// The frame, shared: the presenter keeps it and the generator reads
+    /// its buffers where they are (`FrameGenerator::push_shared`).
+    pub frame: Arc<Frame>,
     /// When its last byte had been taken from the connection (a video
     /// frame that waited for an older one: when that one came).
     pub received: Instant,
@@ -560,7 +561,7 @@ async fn assemble(
                         s.last_decoded = Some(frame.meta.index);
                     }
                     let arrived = Arrived {
-                        frame,
+                        frame: Arc::new(frame),
                         received,
                         decoded: Instant::now(),
                         input,

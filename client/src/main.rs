@@ -461,7 +461,7 @@ fn connect(args: ConnectArgs) -> anyhow::Result<()> {
                 break;
             }
             let frame = match tokio::time::timeout(Duration::from_millis(250), session.frames.recv()).await {
-                Ok(Some(a)) => a.frame,
+                Ok(Some(a)) => std::sync::Arc::unwrap_or_clone(a.frame),
                 Ok(None) => break,
                 Err(_) => continue,
             };

@@ -341,7 +341,7 @@ pub async fn run_headless(
         .frame;
     let mut first_outcome = PushOutcome::Duplicate;
     tokio::task::block_in_place(|| -> anyhow::Result<()> {
-        first_outcome = generator.push(&first)?;
+        first_outcome = generator.push_shared(&first)?;
         generator.generate(0.5)?;
         Ok(())
     })?;
@@ -371,7 +371,7 @@ pub async fn run_headless(
     if let Some(ViewerSource::Live(live)) = config.viewer.as_ref().map(|v| &v.source) {
         live.begin(start_pose, start);
     }
-    let mut kept: VecDeque<Frame> = VecDeque::from([first]);
+    let mut kept: VecDeque<Arc<Frame>> = VecDeque::from([first]);
     // The echo of each kept frame's input (interactive streams).
     let mut echoes: VecDeque<(u64, InputEcho)> = VecDeque::new();
     let mut inputs = Inputs::default();
@@ -743,7 +743,7 @@ impl Pusher {
     fn push_up_to(
         &mut self,
         generator: &mut FrameGenerator,
-        kept: &VecDeque<Frame>,
+        kept: &VecDeque<Arc<Frame>>,
         id: u64,
     ) -> anyhow::Result<()> {
         self.push(generator, kept.iter().filter(|f| f.meta.index <= id))
@@ -755,9 +755,9 @@ impl Pusher {
     fn push<'a>(
         &mut self,
         generator: &mut FrameGenerator,
-        due: impl IntoIterator<Item = &'a Frame>,
+        due: impl IntoIterator<Item = &'a Arc<Frame>>,
     ) -> anyhow::Result<()> {
-        let mut due: Vec<&Frame> = due
+        let mut due: Vec<&Arc<Frame>> = due
             .into_iter()
             .filter(|f| self.last.is_none_or(|p| f.meta.index > p))
             .collect();
@@ -773,7 +773,7 @@ impl Pusher {
         }
         for f in due {
             let t = Instant::now();
-            let outcome = tokio::task::block_in_place(|| generator.push(f))?;
+            let outcome = tokio::task::block_in_place(|| generator.push_shared(f))?;
             self.ingest_ms.push(t.elapsed().as_secs_f64() * 1e3);
             if self.last.is_some_and(|p| p + 1 == f.meta.index) {
                 self.followed.push_back(f.meta.index);
@@ -830,7 +830,7 @@ fn take_in(
     a: crate::Arrived,
     start: Instant,
     scheduler: &mut Scheduler,
-    (kept, echoes): (&mut VecDeque<Frame>, &mut VecDeque<(u64, InputEcho)>),
+    (kept, echoes): (&mut VecDeque<Arc<Frame>>, &mut VecDeque<(u64, InputEcho)>),
     decode_ms: &mut Vec<f64>,
 ) {
     let since = |t: Instant| t.saturating_duration_since(start);
@@ -868,7 +868,7 @@ fn take_in(
 fn produce<'a>(
     slot: &Slot,
     (generator, on_device): (&mut FrameGenerator, Option<&mut DeviceFrames>),
-    kept: &'a VecDeque<Frame>,
+    kept: &'a VecDeque<Arc<Frame>>,
     (generation, passes): (&mut Vec<f64>, &mut Vec<framegen::pipeline::Pass>),
     (start, warp): (Instant, Option<Pose>),
 ) -> anyhow::Result<(Option<Shown<'a>>, Option<Duration>)> {
@@ -1058,7 +1058,7 @@ mod tests {
     #[test]
     fn a_slow_ingest_takes_a_backlog_in_from_its_newest_frame() {
         let size = protocol::FrameSize::new(16, 9);
-        let frames: Vec<Frame> = (0..5).map(|i| Frame::blank(i, size)).collect();
+        let frames: Vec<Arc<Frame>> = (0..5).map(|i| Arc::new(Frame::blank(i, size))).collect();
         let interval = 1000.0 / 30.0;
         let slow = [50.0, 50.0, 10.0, 50.0];
         // (keep pace, recent ingests, frames due, frames taken in)

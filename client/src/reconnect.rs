@@ -228,7 +228,8 @@ impl Renumber {
     }
 
     fn apply(&mut self, arrived: &mut Arrived) {
-        let meta = &mut arrived.frame.meta;
+        // Not shared yet: renumbered in place.
+        let meta = &mut std::sync::Arc::make_mut(&mut arrived.frame).meta;
         let base = match (self.base, self.last) {
             (Some(b), _) => b,
             (None, None) => {
@@ -449,7 +450,7 @@ mod tests {
     fn arrived(index: u64, time: f64, received: Instant) -> Arrived {
         let size = protocol::FrameSize::new(1, 1);
         Arrived {
-            frame: protocol::Frame {
+            frame: std::sync::Arc::new(protocol::Frame {
                 meta: protocol::FrameMeta {
                     index,
                     time,
@@ -465,7 +466,7 @@ mod tests {
                 depth: vec![1.0],
                 motion: vec![[0.0; 2]],
                 extras: vec![],
-            },
+            }),
             received,
             decoded: received,
             input: None,

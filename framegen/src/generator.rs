@@ -23,7 +23,7 @@ use protocol::{Camera, Frame, FrameMeta, FrameSize, Limits, Pose, Window};
 
 use crate::FramegenError;
 use crate::gpu::GpuContext;
-use crate::input::{Prepared, Sanitized, prepare, prepare_into};
+use crate::input::{Prepared, Sanitized, prepare, prepare_into, prepare_shared};
 use crate::output::{DisplayMap, Output, PixelSource};
 use crate::passes::common::camera::PassCamera;
 use crate::passes::common::crop::Crop;
@@ -250,8 +250,26 @@ impl FrameGenerator {
         self.backend.reset();
     }
 
-    /// Takes a rendered frame.
+    /// Takes a rendered frame, copying its buffers (sanitised on the way).
     pub fn push(&mut self, frame: &Frame) -> Result<PushOutcome, FramegenError> {
+        self.push_with(frame, |reuse| prepare_into(frame, reuse))
+    }
+
+    /// [`FrameGenerator::push`] of a frame handed over in an [`Arc`]: its
+    /// buffers are read where they are, not copied, where nothing in them
+    /// needs sanitising ([`crate::input::prepare_shared`]); the frame is
+    /// held until the passes are done with it.
+    pub fn push_shared(&mut self, frame: &Arc<Frame>) -> Result<PushOutcome, FramegenError> {
+        self.push_with(frame, |reuse| prepare_shared(frame, reuse))
+    }
+
+    /// [`FrameGenerator::push`], the frame prepared by `prepare` (given the
+    /// buffers of a prepared frame no longer needed).
+    fn push_with(
+        &mut self,
+        frame: &Frame,
+        prepare: impl FnOnce(Option<Prepared>) -> Prepared,
+    ) -> Result<PushOutcome, FramegenError> {
         frame.validate(&self.limits)?;
         let meta = &frame.meta;
         let (display, crop) = displayed_region(meta, self.settings.display_size);
@@ -278,7 +296,7 @@ impl FrameGenerator {
         let reuse = free
             .and_then(|i| self.recent.remove(i))
             .and_then(|p| Arc::try_unwrap(p).ok());
-        let prepared = Arc::new(prepare_into(frame, reuse));
+        let prepared = Arc::new(prepare(reuse));
         self.recent.push_back(prepared.clone());
         if self.recent.len() > RECENT {
             self.recent.pop_front();

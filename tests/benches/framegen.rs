@@ -40,6 +40,7 @@
 //! `FRAMEGEN_BENCH_SCENE=default` and `FRAMEGEN_BENCH_STREAM=rendered` by
 //! default.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 mod common;
@@ -57,10 +58,12 @@ fn sizes() -> Vec<FrameSize> {
 }
 
 /// Fed frames with times that keep increasing when the sequence wraps. A
-/// frame is handed out by reference with its meta rewritten in place, so
-/// the bench times the generator, not a copy of the frame.
+/// frame is handed out as the client hands a received one over
+/// (`FrameGenerator::push_shared`, its buffers read where they are), with
+/// its meta rewritten in place, so the bench times the generator, not a
+/// copy of the frame.
 struct Feed {
-    frames: Vec<Frame>,
+    frames: Vec<Arc<Frame>>,
     /// Each frame's original time and index.
     base: Vec<(f64, u64)>,
     next: usize,
@@ -70,22 +73,23 @@ impl Feed {
     fn new(frames: Vec<Frame>) -> Self {
         let base = frames.iter().map(|f| (f.meta.time, f.meta.index)).collect();
         Self {
-            frames,
+            frames: frames.into_iter().map(Arc::new).collect(),
             base,
             next: 0,
         }
     }
 
-    fn next(&mut self) -> &Frame {
+    fn next(&mut self) -> &Arc<Frame> {
         let len = self.frames.len();
         let i = self.next % len;
         let lap = (self.next / len) as u64;
         let (time, index) = self.base[i];
-        let f = &mut self.frames[i];
+        let f = Arc::get_mut(&mut self.frames[i])
+            .expect("the generator let go of a frame before the feed comes round to it again");
         f.meta.time = time + lap as f64 * 10.0;
         f.meta.index = index + lap * 1000;
         self.next += 1;
-        f
+        &self.frames[i]
     }
 
     /// The α of the frame generated after the last one handed out: about
@@ -99,7 +103,7 @@ impl Feed {
 }
 
 fn run(g: &mut FrameGenerator, feed: &mut Feed) {
-    g.push(feed.next()).expect("push");
+    g.push_shared(feed.next()).expect("push");
     g.generate(feed.alpha()).expect("generate");
 }
 
@@ -269,7 +273,7 @@ fn bench_size(c: &mut Criterion, size: FrameSize) {
                 );
                 group.bench_function(format!("{method}/total-on-device"), |b| {
                     b.iter(|| {
-                        g.push(feed.next()).expect("push");
+                        g.push_shared(feed.next()).expect("push");
                         let alpha = feed.alpha();
                         g.generate_to(alpha, framegen::CameraSource::Extrapolated, &target)
                             .expect("generate");

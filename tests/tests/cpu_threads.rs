@@ -106,10 +106,11 @@ fn recycled_buffers_leave_no_trace() {
     let mut slots = Sparse::default();
     let all = tests::render_scene("crossing", SIZE, 60.0, 30..34);
     let frames = framegen::decimate::decimate(&all, 2);
-    let (a, b) = (&frames[0], &frames[1]);
-    let (pa, mut pb) = (framegen::input::prepare(a), framegen::input::prepare(b));
+    let (a, mut b) = (&frames[0], frames[1].clone());
     // Some pixels without a surface: they write "no position" entries.
-    pb.depth.iter_mut().step_by(97).for_each(|d| *d = 0.0);
+    b.depth.iter_mut().step_by(97).for_each(|d| *d = 0.0);
+    let b = &b;
+    let (pa, pb) = (framegen::input::prepare(a), framegen::input::prepare(b));
     let n = pb.depth.len();
     let (k, eps, tol) = (3, 0.5, 0.02);
     let levels = Levels::new(3, SIZE.width, SIZE.height);

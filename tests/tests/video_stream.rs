@@ -32,7 +32,7 @@ async fn frames_for(session: &mut client::Session, span: Duration) -> Vec<Frame>
     let started = std::time::Instant::now();
     while started.elapsed() < span {
         match tokio::time::timeout(Duration::from_secs(2), session.frames.recv()).await {
-            Ok(Some(a)) => got.push(a.frame),
+            Ok(Some(a)) => got.push(std::sync::Arc::unwrap_or_clone(a.frame)),
             Ok(None) | Err(_) => break,
         }
     }

@@ -484,7 +484,7 @@ fn run_group(
                 let profiled = *b == BackendKind::Wgpu && (m / s) % 2 == 1;
                 g.set_profiling(profiled);
                 let start = Instant::now();
-                g.push(&fed)?;
+                g.push_shared(&fed)?;
                 let push = start.elapsed();
                 if !scored {
                     continue;

@@ -91,13 +91,7 @@ impl Plan {
             shading: ingest_plan.shading,
         };
         let mut recorder = Recorder::default();
-        let frame = Arc::new(Prepared {
-            color: Vec::new(),
-            depth: Vec::new(),
-            motion: Vec::new(),
-            valid: 0,
-            sanitized: Default::default(),
-        });
+        let frame = Arc::new(Prepared::empty());
         // The recorder fails nothing: every pass only records its name.
         let _ = super::ingest(&mut recorder, &frame, &ingest_plan);
         let ingest = std::mem::take(&mut recorder.passes);

@@ -228,7 +228,7 @@ pub async fn receive_all(session: &mut client::Session) -> Vec<Frame> {
     let mut out = Vec::new();
     while out.len() < FRAMES as usize {
         match tokio::time::timeout(Duration::from_secs(10), session.frames.recv()).await {
-            Ok(Some(a)) => out.push(a.frame),
+            Ok(Some(a)) => out.push(std::sync::Arc::unwrap_or_clone(a.frame)),
             Ok(None) | Err(_) => break,
         }
     }
