@@ -708,6 +708,39 @@ fn whole_pipeline_matches_on(ctx: &Arc<GpuContext>) {
     }
 }
 
+/// A frame handed over in an `Arc` (`push_shared`: its buffers read where
+/// they are, where nothing needs sanitising) makes the same frames, bit
+/// for bit, as the same frame copied (`push`), on both backends: clean
+/// frames (all three buffers shared) and one with a NaN depth and a
+/// negative colour channel (those buffers copied and sanitised, its
+/// motion shared).
+#[test]
+fn a_shared_frame_generates_what_a_copied_one_does() {
+    let mut fs = frames("crossing", 30, 4);
+    fs[2].depth[SIZE.width as usize * 5 + 7] = f32::NAN;
+    fs[2].color[SIZE.width as usize * 9 + 3][1] = half::f16::from_f32(-2.0);
+    let shared: Vec<Arc<Frame>> = fs.iter().cloned().map(Arc::new).collect();
+    let ctx = ctx();
+    for method in [Method::Gffe, Method::Interp] {
+        let s = Settings::for_method(method);
+        let make = |gpu: bool| match gpu {
+            true => FrameGenerator::gpu(s, ctx.clone()).unwrap(),
+            false => FrameGenerator::cpu(s).unwrap(),
+        };
+        for gpu in [false, true] {
+            let (mut copied, mut kept) = (make(gpu), make(gpu));
+            for (f, a) in fs.iter().zip(&shared) {
+                assert_eq!(copied.push(f).unwrap(), kept.push_shared(a).unwrap());
+                let (x, y) = (copied.generate(0.5).unwrap(), kept.generate(0.5).unwrap());
+                let same = x.frame.color == y.frame.color && x.mask == y.mask;
+                assert!(same, "{method} gpu {gpu}: frame {} differs", f.meta.index);
+            }
+            assert_eq!(copied.sanitized(), kept.sanitized());
+            assert!(kept.sanitized().depth > 0);
+        }
+    }
+}
+
 /// Issue 15 §2: a generated frame left on the device (`generate_to`, for
 /// a presenter on that device) holds bit for bit the colour the same
 /// generation reads back, for every method, at a width whose rows copy
