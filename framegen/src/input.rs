@@ -10,6 +10,10 @@
 //!   become 0, which every pass reads as "no surface";
 //! * motion: NaN / ±inf components → 0, and vectors are clamped to
 //!   ±4 image sizes (beyond that a point left the image anyway).
+//!
+//! A frame handed over in an [`Arc`] ([`prepare_shared`]) is not copied
+//! where none of this changes anything: each such buffer is read where it
+//! is ([`Buffer::Shared`]).
 
 use std::sync::Arc;
 
@@ -192,21 +196,6 @@ pub fn prepare_shared(frame: &Arc<Frame>, reuse: Option<Prepared>) -> Prepared {
     prepare_with(frame, Some(frame), reuse)
 }
 
-/// Blocks of a buffer converted on all cores into `out` by `fix`, which
-/// returns each block's replacements; their sum, as integers, so the
-/// result does not depend on the thread count.
-fn sanitize_blocks<T: Copy + Send + Sync>(
-    src: &[T],
-    out: &mut [T],
-    fix: impl Fn(&[T], &mut [T]) -> u32 + Sync + Send,
-) -> u64 {
-    use rayon::prelude::*;
-    out.par_chunks_mut(CONVERT_BLOCK)
-        .zip(src.par_chunks(CONVERT_BLOCK))
-        .map(|(o, s)| u64::from(fix(s, o)))
-        .sum()
-}
-
 /// One buffer of [`prepare_with`], the one `get` picks of `frame`. Where
 /// it may be shared (`share` is the same frame), `scan` tells of
 /// each block whether any value changes, and otherwise how many it counts
@@ -232,7 +221,12 @@ fn sanitize_buffer<T: Copy + Default + Send + Sync + 'static>(
     }
     let kept = kept.and_then(|b| b.reusable(src.len()));
     let mut out = kept.unwrap_or_else(|| crate::par::filled(T::default(), src.len()));
-    let bad = sanitize_blocks(src, &mut out, fix);
+    // Each block's replacements summed as integers: the same count for
+    // any thread count.
+    let bad = (out.par_chunks_mut(CONVERT_BLOCK))
+        .zip(src.par_chunks(CONVERT_BLOCK))
+        .map(|(o, s)| u64::from(fix(s, o)))
+        .sum();
     (Buffer::Own(out), bad)
 }
 
