@@ -7,7 +7,7 @@
 
 use framegen::input::Prepared;
 use framegen::passes::common::camera::PassCamera;
-use framegen::passes::gffe::history::{History, PrevHistory};
+use framegen::passes::gffe::history::{History, PrevHistory, SeenAgain};
 use framegen::{FrameGenerator, Method, Settings};
 use protocol::{Frame, FrameSize};
 
@@ -154,10 +154,12 @@ fn recycled_buffers_leave_no_trace() {
     };
     // Compared whole: a pixel that is not dynamic stores only `P_0`.
     let fresh = tracker.track_into(History::empty()).expanded();
+    // Flags all set, of the previous frame's length: each is cleared.
     let garbage = History {
         positions: vec![[f32::NAN, 1e30, -7.0, 1.0]; k as usize * n],
         track: vec![0xdead_beef; n],
         dynamic: 12345,
+        seen: SeenAgain::from_words(&vec![1; n]),
     };
     let recycled = tracker.track_into(garbage).expanded();
     assert!(
@@ -167,6 +169,8 @@ fn recycled_buffers_leave_no_trace() {
     assert_eq!(bits(&fresh.positions), bits(&recycled.positions));
     assert_eq!(fresh.track, recycled.track);
     assert_eq!(fresh.dynamic, recycled.dynamic);
+    assert_eq!(fresh.seen, recycled.seen);
+    assert_eq!(fresh.seen.len(), n);
     // Without a tolerance (no background to seed) nothing is confirmed and
     // nothing else changes.
     let unconfirmed = Tracker {
@@ -198,6 +202,7 @@ fn recycled_buffers_leave_no_trace() {
         levels,
         texels: &bg_a,
         seeds: None,
+        seen: Some(&fresh.seen),
     };
     let junk = Texel {
         pos: [3.0, f32::NAN, 1.0, 1.0],
@@ -235,6 +240,7 @@ fn recycled_buffers_leave_no_trace() {
         texels: &clean,
         levels,
         seeds: None,
+        seen: None,
     };
     let mut carried = vec![7, 7, 3];
     let reuse = vec![junk; levels.total() as usize];
@@ -330,7 +336,7 @@ fn unseeded_backgrounds_are_the_whole_ones() {
     // The previous frame's history, whole background and unseeded one.
     let mut prev: Option<(History, Vec<background::Texel>, Unseeded)> = None;
     let mut spare = Unseeded::default();
-    let mut carried_seen = 0;
+    let (mut carried_seen, mut seen_again) = (0, 0);
     for (index, p) in prepared.iter().enumerate() {
         let (camera, before) = cameras(&frames, &prepared, index);
         let prev_hist = prev.as_ref().and_then(|(h, _, _)| continued(h, before));
@@ -361,6 +367,8 @@ fn unseeded_backgrounds_are_the_whole_ones() {
                         track: &h.track,
                         color: &pp.color,
                     }),
+                    // The seeds this frame saw again.
+                    seen: Some(&hist.seen),
                 })
         };
         let mut carried = Vec::new();
@@ -422,14 +430,15 @@ fn unseeded_backgrounds_are_the_whole_ones() {
             "frame {index}: {seeded_here} seeds"
         );
         carried_seen += carried.len();
+        seen_again += hist.seen.count();
         if let Some((_, _, u)) = prev.take() {
             spare = u;
         }
         prev = Some((hist, whole, unseeded));
     }
     assert!(
-        frames.len() >= 4 && carried_seen > 100,
-        "{carried_seen} carried"
+        frames.len() >= 4 && carried_seen > 100 && seen_again > n,
+        "{carried_seen} carried, {seen_again} seen again"
     );
 }
 
@@ -461,6 +470,7 @@ fn compact_histories_are_the_whole_ones() {
             positions: vec![[f32::NAN, 1e30, -7.0, 1.0]; k as usize * n],
             track: vec![0xdead_beef; n],
             dynamic: 12345,
+            seen: SeenAgain::from_words(&[1; 7]),
         };
         let compact = Tracker {
             camera: &camera,
@@ -477,6 +487,7 @@ fn compact_histories_are_the_whole_ones() {
             bits(&whole),
             "frame {index}"
         );
+        assert_eq!(compact.seen, whole.seen, "frame {index}");
         // Trajectories longer than one that continue a static pixel.
         continued_chains += (0..n)
             .filter(|&x| history::is_dynamic(whole.track[x]) && history::chain(whole.track[x]) > 1)

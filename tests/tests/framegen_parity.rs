@@ -51,11 +51,12 @@ fn unprojected(f: &Frame) -> Vec<[f32; 4]> {
     framegen::passes::gffe::history::track(&cam, &p.depth, &p.motion, None, 1, 0.5, 0.02).positions
 }
 
-/// History tracking and background collection: positions, track words and
-/// background texels after every frame.
+/// History tracking and background collection: positions, track words,
+/// the seeds seen again and background texels after every frame.
 #[test]
 fn history_and_background_match() {
     let ctx = ctx();
+    let mut seen_again = 0;
     for scene in tests::HARD_CASES {
         let fs = frames(scene, 30, 5);
         let s = Settings {
@@ -71,6 +72,9 @@ fn history_and_background_match() {
             let b = gpu.snapshot().unwrap().unwrap();
             let n = a.track.len();
             let track_diff = a.track.iter().zip(&b.track).filter(|(x, y)| x != y).count();
+            assert_eq!((a.seen.len(), b.seen.len()), (n, n), "{scene}");
+            let seen_diff = a.seen.iter().zip(&b.seen).filter(|(x, y)| x != y).count();
+            seen_again += a.seen.iter().filter(|&&s| s != 0).count();
             let pos_diff = a
                 .positions
                 .iter()
@@ -106,7 +110,7 @@ fn history_and_background_match() {
                     .all(|t| alpha_one(&t))
             );
             eprintln!(
-                "{scene}: track {track_diff} positions {pos_diff} bg valid {bg_valid} bg pos {bg_pos} bg colour {bg_color} of {n}"
+                "{scene}: track {track_diff} seen {seen_diff} positions {pos_diff} bg valid {bg_valid} bg pos {bg_pos} bg colour {bg_color} of {n}"
             );
             // Boundary flips only: at most 0.5 % of the pixels.
             let bound = n / 200 + 2;
@@ -114,6 +118,7 @@ fn history_and_background_match() {
                 track_diff <= bound,
                 "{scene}: {track_diff} track words differ"
             );
+            assert!(seen_diff <= bound, "{scene}: {seen_diff} seen flags differ");
             assert!(
                 pos_diff <= 3 * bound,
                 "{scene}: {pos_diff} positions differ"
@@ -132,6 +137,8 @@ fn history_and_background_match() {
             );
         }
     }
+    // Seeds were seen again (so the comparison above compared some).
+    assert!(seen_again > 1000, "{seen_again}");
 }
 
 /// The depth test is exact: GPU splat of the same candidates picks the same

@@ -188,6 +188,12 @@ impl Backend for CpuBackend {
             positions: c.history.clone().expanded().positions,
             track: c.history.track.clone(),
             background: background::seeded(c.background.texels.clone(), c.seeds()),
+            seen: {
+                let words = c.history.seen.words();
+                (0..c.history.track.len())
+                    .map(|i| words.get(i).copied().unwrap_or(0))
+                    .collect()
+            },
         }))
     }
 }
@@ -337,6 +343,8 @@ impl Executor for CpuBackend {
                 levels: p.levels,
                 texels: &p.background.texels,
                 seeds: Some(p.seeds()),
+                // The seeds this frame's history saw again.
+                seen: Some(&i.state.history.seen),
             });
         let reuse = match i.spare.as_mut() {
             Some(s) => std::mem::take(&mut s.background),

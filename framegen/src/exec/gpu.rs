@@ -127,6 +127,7 @@ struct Scratch {
     mask: Option<wgpu::Buffer>,
     pyramid: Option<wgpu::Buffer>,
     dynamic: Option<wgpu::Buffer>,
+    seen: Option<wgpu::Buffer>,
     shaded: Option<wgpu::Buffer>,
     /// The packed colour and source bytes of a generated frame.
     packed_color: Option<wgpu::Buffer>,
@@ -231,6 +232,9 @@ struct Ingest {
     winners: wgpu::Buffer,
     candidates: wgpu::Buffer,
     dynamic: wgpu::Buffer,
+    /// The history's `SeenAgain` flags (a `u32` per previous pixel), which
+    /// background collection reads.
+    seen: wgpu::Buffer,
 }
 
 /// The wgpu backend.
@@ -683,6 +687,10 @@ impl Backend for GpuBackend {
             background: self
                 .ctx
                 .read_pod(&c.background, c.levels.total() as usize)?,
+            seen: match (&self.scratch.seen, c.k) {
+                (Some(seen), 1..) => self.ctx.read_pod(seen, n)?,
+                _ => Vec::new(),
+            },
         }))
     }
 
@@ -774,7 +782,8 @@ impl Executor for GpuBackend {
         };
         let (s, pool) = (&mut self.scratch, &self.rec.pool);
         let slots = u64::from(plan.levels.total().max(n)) * 4;
-        let sources = u64::from(prev.as_ref().map_or(0, |(_, p)| p.levels.len(0)).max(n)) * 8;
+        let level0 = u64::from(prev.as_ref().map_or(0, |(_, p)| p.levels.len(0)).max(n));
+        let sources = level0 * 8;
         self.ingest = Some(Ingest {
             buffers,
             prev,
@@ -785,6 +794,7 @@ impl Executor for GpuBackend {
             winners: ensure(ctx, pool, &mut s.winners, "winners", slots).clone(),
             candidates: ensure(ctx, pool, &mut s.candidates, "candidates", sources).clone(),
             dynamic: ensure(ctx, pool, &mut s.dynamic, "dynamic count", 16).clone(),
+            seen: ensure(ctx, pool, &mut s.seen, "seen again", level0.max(1) * 4).clone(),
         });
         Ok(())
     }
@@ -802,7 +812,7 @@ impl Executor for GpuBackend {
                 enc,
                 (&plan.camera, &b.depth, &b.motion),
                 prev.map(|(cam, p)| (cam, p.history(), &p.depth)),
-                (b.history(), &i.dynamic),
+                (b.history(), &i.dynamic, &i.seen),
                 (plan.k, plan.epsilon, plan.confirm_tolerance()),
             );
         })
@@ -820,7 +830,7 @@ impl Executor for GpuBackend {
                 (plan.levels, plan.tolerance),
                 i.prev
                     .as_ref()
-                    .map(|(cam, p)| (cam, p.levels, &p.background)),
+                    .map(|(cam, p)| (cam, p.levels, &p.background, &i.seen)),
                 (&b.background, &k.splat, scratch),
             );
         })

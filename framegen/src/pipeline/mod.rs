@@ -329,4 +329,8 @@ pub struct Snapshot {
     pub track: Vec<u32>,
     /// Background texels.
     pub background: Vec<crate::passes::gffe::background::Texel>,
+    /// The history's `SeenAgain` flags of the previous frame's pixels, 1
+    /// where set, as many as the frame has pixels (all 0 without a
+    /// previous frame).
+    pub seen: Vec<u32>,
 }

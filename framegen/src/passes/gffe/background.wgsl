@@ -19,6 +19,8 @@ struct BgParams {
 @group(0) @binding(6) var<storage, read> keys: array<u32>;
 @group(0) @binding(7) var<storage, read> winners: array<u32>;
 @group(0) @binding(8) var<storage, read_write> candidates: array<vec2<u32>>;
+// The history's `SeenAgain` flags of the previous frame's pixels (level 0).
+@group(0) @binding(9) var<storage, read> seen_again: array<u32>;
 
 @compute @workgroup_size(256)
 fn bg_init(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -50,7 +52,10 @@ fn bg_project(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
     var out = vec2<u32>(NONE, 0u);
     let t = prev_bg[bp.prev.x + i];
     let l = bp.config.y;
-    if bg_valid(t) {
+    // A previous seed the current frame saw again (and no pixel of it
+    // that is not confirmed landed in) is not reprojected.
+    let again = l == 0u && seen_again[i] == 1u;
+    if bg_valid(t) && !again {
         let r = project(bp.camera, rebased(bg_pos(t)));
         if r.ok {
             let s = cell(r.pixel, bp.level.y, bp.level.z, f32(1u << l));

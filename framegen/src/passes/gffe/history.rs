@@ -39,12 +39,22 @@
 //!   within ±0.5 % ꟻLIP per scene.) Only the background needs it: a
 //!   method that collects no background layers passes no tolerance and
 //!   confirms nothing (a random read per static pixel saved).
+//! * **Seen again.** Where a confirmed pixel lands in a pixel of the
+//!   previous frame that was confirmed static too (a seed of the previous
+//!   background's level 0), that seed is the same surface at the same
+//!   depth, seen again; where a pixel that is not confirmed lands in one,
+//!   it may be what that pixel hides now. The pass flags both
+//!   ([`SeenAgain`]), and background collection does not reproject a
+//!   seed seen again that nothing unsure landed in (`background.rs`; 97 %
+//!   of the previous seeds on the default scene at 720p).
 //! * Invalid depth (sanitised NaN / ≤ 0) gives no position at all.
 //! * Without a previous frame (first frame, cut, reset) every pixel is
 //!   static.
 //!
 //! Positions are stored relative to the current camera centre; the previous
 //! history is rebased by the previous camera's centre (computed in `f64`).
+
+use std::sync::atomic::{AtomicU8, Ordering::Relaxed};
 
 use glam::{Vec2, Vec4};
 
@@ -89,6 +99,10 @@ pub struct History {
     pub track: Vec<u32>,
     /// Number of pixels that failed the static test.
     pub dynamic: u32,
+    /// Its flags of the previous frame's pixels, from which background
+    /// collection knows the seeds it need not reproject (empty without a
+    /// previous frame or a confirmation).
+    pub seen: SeenAgain,
 }
 
 impl History {
@@ -98,6 +112,7 @@ impl History {
             positions: Vec::new(),
             track: Vec::new(),
             dynamic: 0,
+            seen: SeenAgain::default(),
         }
     }
 
@@ -148,6 +163,142 @@ pub fn is_confirmed(track: u32) -> bool {
 /// How many of `P_1..` are real history.
 pub fn chain(track: u32) -> u32 {
     track >> 2
+}
+
+/// Whether a track word is a background seed: a static pixel confirmed by
+/// the previous frame (`background::seeds`; WGSL `(track & 3u) == 2u`).
+#[inline]
+pub fn is_seed(track: u32) -> bool {
+    !is_dynamic(track) && is_confirmed(track)
+}
+
+/// Two flags per pixel of the previous frame, from which background
+/// collection knows the seeds it need not reproject:
+///
+/// * **seen**: the pixel was a seed of the previous background (confirmed
+///   static there) and a confirmed pixel of the current frame lands in it
+///   as deep, within the confirmation's tolerance: the surface the current
+///   frame's own seed shows again;
+/// * **unsure**: a pixel of the current frame that is *not* confirmed
+///   (static but not confirmed, or dynamic) lands in it: reprojected, the
+///   seed may land on that pixel, which holds no seed, and be carried
+///   over there (behind an object that moved in front of it, or where a
+///   slanted surface's confirmation failed).
+///
+/// A seed is skipped where it is seen and not unsure ([`SeenAgain::skips`]).
+/// Without the second flag, where the current frame is scaled against the
+/// previous one (a turn, a dolly) two current pixels can land in one
+/// previous pixel, one confirmed and one not, and the seed was lost from
+/// the one not confirmed: `fast_rotation` at 640×360 lost 5–25 % of the
+/// fragments carried over in some frames, +0.7 % ꟻLIP.
+///
+/// Flags are only ever set during the pass (by any band, so atomically:
+/// relaxed byte stores, plain `mov`s on x86-64, into two planes, so no
+/// read-modify-write), so the result does not depend on the order or the
+/// thread count. The GPU keeps one `u32` a pixel, `seen | unsure << 1`
+/// (`atomicOr`), as [`SeenAgain::words`] gives them.
+#[derive(Debug, Default)]
+pub struct SeenAgain {
+    seen: Vec<AtomicU8>,
+    unsure: Vec<AtomicU8>,
+}
+
+impl SeenAgain {
+    /// `n` pixels, no flag set, in these planes where they have that
+    /// length.
+    fn reset(&mut self, n: usize) {
+        use rayon::prelude::*;
+        for plane in [&mut self.seen, &mut self.unsure] {
+            if plane.len() != n {
+                *plane = (0..n).map(|_| AtomicU8::new(0)).collect();
+                continue;
+            }
+            (plane.par_iter().with_min_len(64 * 1024)).for_each(|f| f.store(0, Relaxed));
+        }
+    }
+
+    /// Flags pixel `i` of the previous frame seen.
+    #[inline]
+    fn set_seen(&self, i: usize) {
+        if let Some(f) = self.seen.get(i) {
+            f.store(1, Relaxed);
+        }
+    }
+
+    /// Flags pixel `i` of the previous frame unsure.
+    #[inline]
+    fn set_unsure(&self, i: usize) {
+        if let Some(f) = self.unsure.get(i) {
+            f.store(1, Relaxed);
+        }
+    }
+
+    /// Whether background collection skips the seed of pixel `i` of the
+    /// previous frame: seen and not unsure (never past the end: an empty
+    /// set skips nothing).
+    #[inline]
+    pub fn skips(&self, i: usize) -> bool {
+        let flag = |plane: &[AtomicU8]| plane.get(i).is_some_and(|f| f.load(Relaxed) != 0);
+        flag(&self.seen) && !flag(&self.unsure)
+    }
+
+    /// Whether it skips all four pixels `i ..` (two loads).
+    #[inline]
+    pub fn skips4(&self, i: usize) -> bool {
+        let four = |plane: &[AtomicU8]| {
+            let f = plane.get(i..)?.first_chunk::<4>()?;
+            Some(f.each_ref().map(|f| f.load(Relaxed)))
+        };
+        four(&self.seen) == Some([1; 4]) && four(&self.unsure) == Some([0; 4])
+    }
+
+    /// Flags as the GPU keeps them, `seen | unsure << 1` a pixel, or read
+    /// back from it.
+    pub fn from_words(words: &[u32]) -> Self {
+        let plane = |bit: u32| {
+            words
+                .iter()
+                .map(move |&w| AtomicU8::new(u8::from(w & bit != 0)))
+        };
+        Self {
+            seen: plane(1).collect(),
+            unsure: plane(2).collect(),
+        }
+    }
+
+    /// The flags as [`SeenAgain::from_words`] takes them.
+    pub fn words(&self) -> Vec<u32> {
+        (self.seen.iter().zip(&self.unsure))
+            .map(|(s, u)| u32::from(s.load(Relaxed)) | u32::from(u.load(Relaxed)) << 1)
+            .collect()
+    }
+
+    /// How many pixels there are (the previous frame's, or 0).
+    pub fn len(&self) -> usize {
+        self.seen.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.seen.is_empty()
+    }
+
+    /// How many seeds it skips.
+    pub fn count(&self) -> usize {
+        (0..self.len()).filter(|&i| self.skips(i)).count()
+    }
+}
+
+impl Clone for SeenAgain {
+    fn clone(&self) -> Self {
+        Self::from_words(&self.words())
+    }
+}
+
+impl PartialEq for SeenAgain {
+    fn eq(&self, other: &Self) -> bool {
+        self.words() == other.words()
+    }
 }
 
 /// CPU reference of Algorithm 1. `camera` is `C_t` with its centre at the
@@ -225,6 +376,14 @@ impl Tracker<'_> {
         if track_words.len() != n {
             track_words = crate::par::filled(0, n);
         }
+        // Only a confirmation sees anything again.
+        let mut seen = reuse.seen;
+        let confirming = self.tolerance.is_some();
+        seen.reset(
+            self.prev
+                .filter(|_| confirming)
+                .map_or(0, |p| p.track.len()),
+        );
         // Bands of rows; each band gets its slice of every plane.
         let band = crate::par::band(self.camera.width() as usize, n);
         let mut planes: Vec<_> = positions
@@ -256,7 +415,7 @@ impl Tracker<'_> {
                         let c0 = g * LANES;
                         let x = start + first + c0;
                         if group.len() == LANES
-                            && let Some((words, p)) = self.track4(x, c0, y)
+                            && let Some((words, p)) = self.track4(x, c0, y, &seen)
                         {
                             // Static: `P_0` only (the planes after it
                             // would repeat it).
@@ -270,7 +429,7 @@ impl Tracker<'_> {
                             let c = c0 + l;
                             let center = Vec2::new(c as f32 + 0.5, y);
                             // Every element is written, valid or not.
-                            let w = self.track(start + first + c, center, &mut entries);
+                            let w = self.track(start + first + c, center, &mut entries, &seen);
                             let stored = if is_dynamic(w) { planes.len() } else { 1 };
                             for (plane, e) in planes.iter_mut().zip(&entries).take(stored) {
                                 plane[first + c] = *e;
@@ -287,6 +446,7 @@ impl Tracker<'_> {
             positions,
             track: track_words,
             dynamic,
+            seen,
         }
     }
 
@@ -300,9 +460,16 @@ impl Tracker<'_> {
     /// caller tracks the four one by one.
     ///
     /// Returns the track words and each pixel's position `p`, which every
-    /// entry of a static pixel holds.
+    /// entry of a static pixel holds; flags in `seen` the previous pixels
+    /// they land in.
     #[inline]
-    fn track4(&self, x: usize, c0: usize, y: f32) -> Option<([u32; LANES], [[f32; 4]; LANES])> {
+    fn track4(
+        &self,
+        x: usize,
+        c0: usize,
+        y: f32,
+        seen: &SeenAgain,
+    ) -> Option<([u32; LANES], [[f32; 4]; LANES])> {
         let prev = self.prev?;
         let depth: &[f32; LANES] = self.depth.get(x..)?.first_chunk()?;
         let motion: &[[f32; 2]; LANES] = self.motion.get(x..)?.first_chunk()?;
@@ -350,7 +517,7 @@ impl Tracker<'_> {
         let mut words = [((self.k() - 1) as u32) << 2; LANES];
         let p = p.positions(w);
         if let Some(tolerance) = self.tolerance {
-            let confirmed = self.confirm4(prev, w, &r, tolerance);
+            let confirmed = self.confirm4(prev, w, &r, tolerance, seen);
             for (word, c) in words.iter_mut().zip(confirmed) {
                 *word |= u32::from(c) << 1;
             }
@@ -361,7 +528,8 @@ impl Tracker<'_> {
     /// [`agrees`] of four static positions with `w`s `kind` (see
     /// [`Tracker::track`]), seen from the previous camera as `seen` (the
     /// static test's projection), against the previous depth in the pixel
-    /// each lands in.
+    /// each lands in; flags those pixels in `again` (seen where one
+    /// agrees with a seed, unsure where it does not agree).
     #[inline]
     fn confirm4(
         &self,
@@ -369,6 +537,7 @@ impl Tracker<'_> {
         kind: Vec4,
         seen: &Projected4,
         tolerance: f32,
+        again: &SeenAgain,
     ) -> [bool; LANES] {
         let (pw, ph) = (prev.camera.width(), prev.camera.height());
         let found = cells(seen.x, seen.y, seen.valid, pw, ph);
@@ -383,6 +552,11 @@ impl Tracker<'_> {
         let near = (seen.depth - before).abs().cmple(before * tolerance);
         let agrees = (sky & was_sky) | (!sky & surface & near);
         let agrees = agrees.bitmask();
+        for (l, j) in found.into_iter().enumerate() {
+            if let Some(j) = j {
+                flag(prev, j as usize, agrees & 1 << l != 0, again);
+            }
+        }
         std::array::from_fn(|l| agrees & 1 << l != 0)
     }
 
@@ -394,9 +568,16 @@ impl Tracker<'_> {
     /// Pixel `x` (centre `center`): its positions `P_0..P_{k−1}` into
     /// `entries[..k]` and its track word; all invalid (word 0) for an
     /// invalid depth (no position at all).
+    /// Flags in `seen` the previous pixel it lands in, where it has one.
     #[allow(clippy::needless_range_loop)] // mirrors the shader's indexing
     #[inline]
-    fn track(&self, x: usize, center: Vec2, entries: &mut [[f32; 4]; MAX_HISTORY]) -> u32 {
+    fn track(
+        &self,
+        x: usize,
+        center: Vec2,
+        entries: &mut [[f32; 4]; MAX_HISTORY],
+        seen: &SeenAgain,
+    ) -> u32 {
         let Self {
             camera,
             depth,
@@ -424,16 +605,19 @@ impl Tracker<'_> {
             });
             let found =
                 cell(target, prev.camera.width(), prev.camera.height(), 1.0).map(|j| j as usize);
-            // Confirmed where the point lands in the previous frame.
-            if is_static
-                && let Some(tolerance) = tolerance
+            // Confirmed where the point lands in the previous frame; that
+            // pixel flagged either way.
+            if let Some(tolerance) = tolerance
                 && let Some(r) = reprojected
                 && let Some(j) = cell(r.pixel, prev.camera.width(), prev.camera.height(), 1.0)
             {
                 let before = prev.depth[j as usize];
-                if agrees(p[3] == W_DIRECTION, r.depth, before, tolerance) {
+                let confirmed =
+                    is_static && agrees(p[3] == W_DIRECTION, r.depth, before, tolerance);
+                if confirmed {
                     word |= 2;
                 }
+                flag(prev, j as usize, confirmed, seen);
             }
             if !is_static {
                 let mut len = 0usize;
@@ -462,6 +646,18 @@ impl Tracker<'_> {
             }
         }
         word
+    }
+}
+
+/// Flags pixel `j` of the previous frame, which a pixel of the current
+/// frame lands in: seen where it was a seed and that pixel is
+/// `confirmed` by it, unsure where that pixel is not confirmed.
+#[inline]
+fn flag(prev: &PrevHistory<'_>, j: usize, confirmed: bool, seen: &SeenAgain) {
+    match confirmed {
+        true if is_seed(prev.track[j]) => seen.set_seen(j),
+        true => {}
+        false => seen.set_unsure(j),
     }
 }
 
@@ -511,6 +707,7 @@ impl GpuHistory {
                 "history",
                 &[
                     Params, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, Read,
+                    ReadWrite,
                 ],
             ),
         }
@@ -521,16 +718,19 @@ impl GpuHistory {
     /// tolerance ([`Tracker`]'s). `prev` is the previous frame's camera,
     /// history and depth, or `None` after a reset (its buffers are then
     /// not read; the placeholder is bound in their place). `dynamic`
-    /// receives the count of dynamic pixels (atomic add; clear it first).
+    /// receives the count of dynamic pixels (atomic add; clear it first),
+    /// `seen` the [`SeenAgain`] flags, one `u32` per previous pixel (at
+    /// least one element; cleared here).
     pub fn encode(
         &self,
         ctx: &Rec<'_>,
         encoder: &mut wgpu::CommandEncoder,
         (camera, depth, motion): (&PassCamera, &wgpu::Buffer, &wgpu::Buffer),
         prev: Option<(&PassCamera, GpuHistoryBuffers<'_>, &wgpu::Buffer)>,
-        (out, dynamic): (GpuHistoryBuffers<'_>, &wgpu::Buffer),
+        (out, dynamic, seen): (GpuHistoryBuffers<'_>, &wgpu::Buffer, &wgpu::Buffer),
         (k, epsilon, tolerance): (u32, f32, Option<f32>),
     ) {
+        encoder.clear_buffer(seen, 0, None);
         let (w, h) = (camera.width(), camera.height());
         let (prev_cam, pw, ph) = match &prev {
             Some((c, ..)) => (**c, c.width(), c.height()),
@@ -563,6 +763,7 @@ impl GpuHistory {
                 out.track,
                 dynamic,
                 pd,
+                seen,
             ],
             u64::from(w) * u64::from(h),
         );
@@ -582,9 +783,12 @@ mod tests {
         let mut track = vec![0; n];
         let mut entries = [[0.0; 4]; MAX_HISTORY];
         let mut dynamic = 0;
+        let mut seen = SeenAgain::default();
+        let confirming = t.tolerance.is_some();
+        seen.reset(t.prev.filter(|_| confirming).map_or(0, |p| p.track.len()));
         for x in 0..n {
             let center = Vec2::new((x % w) as f32 + 0.5, (x / w) as f32 + 0.5);
-            track[x] = t.track(x, center, &mut entries);
+            track[x] = t.track(x, center, &mut entries, &seen);
             for (i, e) in entries[..k].iter().enumerate() {
                 positions[i * n + x] = *e;
             }
@@ -594,12 +798,13 @@ mod tests {
             positions,
             track,
             dynamic,
+            seen,
         }
     }
 
-    fn bits(h: &History) -> (Vec<[u32; 4]>, &[u32], u32) {
+    fn bits(h: &History) -> (Vec<[u32; 4]>, &[u32], u32, &SeenAgain) {
         let p = h.positions.iter().map(|p| p.map(f32::to_bits)).collect();
-        (p, &h.track, h.dynamic)
+        (p, &h.track, h.dynamic, &h.seen)
     }
 
     /// A deterministic scramble of `i` into `0..1`.
@@ -658,6 +863,14 @@ mod tests {
                     _ => {}
                 }
             }
+            // Most previous pixels seeds (confirmed static), as if tracked
+            // after a frame of their own: a pixel that lands in one and
+            // agrees sees it again, one that lands in another does not.
+            for (x, word) in prev.track.iter_mut().enumerate() {
+                if noise(x, 7) < 0.7 {
+                    *word |= 2;
+                }
+            }
             // Some previous depths a confirmation cannot agree with: sky,
             // no surface, far off, NaN.
             let before: Vec<f32> = (prev_depth.iter().enumerate())
@@ -711,16 +924,35 @@ mod tests {
                 let w = size.width as usize;
                 let groups = (0..n)
                     .filter(|x| x % w % LANES == 0)
-                    .filter(|&x| t.track4(x, x % w, (x / w) as f32 + 0.5).is_some())
+                    .filter(|&x| {
+                        let seen = SeenAgain::default();
+                        t.track4(x, x % w, (x / w) as f32 + 0.5, &seen).is_some()
+                    })
                     .count();
                 let all = size.height as usize * w.div_ceil(LANES);
                 assert!(groups * 4 > all && groups < all, "{groups} of {all} groups");
                 let confirmed = fast.track.iter().filter(|&&w| is_confirmed(w)).count();
+                let seen = fast.seen.count();
                 if tolerance.is_some() {
                     assert!(confirmed > n / 4 && confirmed < n * 3 / 4, "{confirmed}");
+                    // Seeds both seen again and not.
+                    assert!(seen > n / 8 && seen < confirmed, "{seen} of {confirmed}");
+                } else {
+                    assert!(fast.seen.is_empty());
                 }
                 assert!(fast.dynamic > 0);
             }
+        }
+    }
+
+    /// `h`, the history of a frame of `depth` seen by `camera`, as the next
+    /// frame continues it.
+    fn seen_by<'a>(camera: PassCamera, h: &'a History, depth: &'a [f32]) -> PrevHistory<'a> {
+        PrevHistory {
+            camera,
+            positions: &h.positions,
+            track: &h.track,
+            depth,
         }
     }
 
@@ -764,17 +996,39 @@ mod tests {
             })
             .collect();
         let still = vec![[0.0; 2]; n];
-        let prev = track(&cam, &before, &still, None, 2, 0.5, 0.02);
-        let prev = PrevHistory {
-            camera: cam,
-            positions: &prev.positions,
-            track: &prev.track,
-            depth: &before,
-        };
-        let h = track(&cam, &now, &still, Some(prev), 2, 0.5, 0.02);
+        let first = track(&cam, &before, &still, None, 2, 0.5, 0.02);
+        let h = track(
+            &cam,
+            &now,
+            &still,
+            Some(seen_by(cam, &first, &before)),
+            2,
+            0.5,
+            0.02,
+        );
         assert_eq!(h.dynamic, 0, "the object keeps its screen position");
         for (x, &word) in h.track.iter().enumerate() {
             assert_eq!(is_confirmed(word), !object(x), "pixel {x}");
+        }
+        // The previous frame had no seeds: nothing is seen again.
+        assert_eq!((h.seen.len(), h.seen.count()), (n, 0));
+        // The next frame: the object stays where it is now, and a new one
+        // appears in front of the wall (columns 32..36 of rows 3..10).
+        // The camera stays, so each pixel lands in itself: every seed of
+        // `h` is skipped except where the new object hides it (its pixels
+        // are not confirmed), and the object's pixels, confirmed now,
+        // were no seeds.
+        let new = |x: usize| (3..10).contains(&(x / w)) && (32..36).contains(&(x % w));
+        let later: Vec<f32> = (0..n).map(|x| if new(x) { 2.0 } else { now[x] }).collect();
+        let prev = seen_by(cam, &h, &now);
+        let again = track(&cam, &later, &still, Some(prev), 2, 0.5, 0.02);
+        assert_eq!(again.seen.len(), n);
+        // The new object's pixels, not confirmed, leave theirs unsure.
+        for (x, word) in again.seen.words().into_iter().enumerate() {
+            let seed = is_seed(h.track[x]);
+            assert_eq!(word & 2 != 0, new(x), "pixel {x}");
+            assert_eq!(again.seen.skips(x), seed && !new(x), "pixel {x}");
+            assert_eq!(is_confirmed(again.track[x]), !new(x), "pixel {x}");
         }
     }
 }

@@ -17,6 +17,8 @@ struct HistoryParams {
 @group(0) @binding(6) var<storage, read_write> track: array<u32>;
 @group(0) @binding(7) var<storage, read_write> dynamic_count: array<atomic<u32>>;
 @group(0) @binding(8) var<storage, read> prev_depth: array<f32>;
+// `SeenAgain` of the previous pixels, `seen | unsure << 1` (cleared first).
+@group(0) @binding(9) var<storage, read_write> seen_again: array<atomic<u32>>;
 
 @compute @workgroup_size(256)
 fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -52,6 +54,7 @@ fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         // Confirmed where the point lands in the previous frame; a
         // negative tolerance: no background, nothing to confirm.
         let seen = cell(r.pixel, hp.sizes.z, hp.sizes.w, 1.0);
+        var confirmed = false;
         if is_static && seen != NONE && hp.epsilon.y >= 0.0 {
             // The pixel's point, seen from the previous camera (`r`), is as
             // deep as the previous frame's depth there (`agrees`).
@@ -64,6 +67,16 @@ fn history(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
             }
             if agrees {
                 word = word | 2u;
+                confirmed = true;
+            }
+        }
+        // The previous pixel it lands in (`flag`): seen where it was a
+        // seed and this pixel is confirmed, unsure where it is not.
+        if r.ok && seen != NONE && hp.epsilon.y >= 0.0 {
+            if !confirmed {
+                atomicOr(&seen_again[seen], 2u);
+            } else if (prev_track[seen] & 3u) == 2u {
+                atomicOr(&seen_again[seen], 1u);
             }
         }
         if !is_static {
