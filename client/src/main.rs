@@ -742,6 +742,9 @@ fn session(
             println!("  passes: {}", report.passes.join(", "));
         }
         print!("{}", report.summary.to_text());
+        if let Some(line) = report.stream_shortfall() {
+            println!("  {line}");
+        }
         let v = &report.viewer;
         if args.interactive {
             println!(
